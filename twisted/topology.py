@@ -1,0 +1,228 @@
+"""P-data: the topological state of an open rope (DESIGN.md section 4).
+
+A state lists the crossing *visits* met when walking the projected rope from the head (link-0 tip)
+to the tail (link-20 tip). Visit ``p`` (1..2n) records whether the rope passes over (``O``) or
+under (``U``) there, the position of the other visit of the same crossing (its partner), and the
+crossing's sign ``sign((d_over x d_under) . e_z)`` with both strand directions taken head->tail.
+
+The exchange format is a JSON list ``[[position, "O"|"U", partner, "+"|"-"], ...]`` sorted by
+position; the empty rope is ``[]``. Because positions are 1..2n in walking order, that sorted list
+is already canonical: two states are equal exactly when their lists are equal, and the compact JSON
+text is the state's key.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "PData",
+    "PDataError",
+    "Visit",
+    "cross",
+    "mirror",
+    "parse_p_data",
+    "reverse",
+    "top",
+    "Top",
+]
+
+
+class PDataError(ValueError):
+    """A P-data state that is malformed; the message says which entry and what is wrong."""
+
+
+class Visit(NamedTuple):
+    """One visit of the rope to a crossing."""
+
+    position: int
+    over: str  # "O" or "U"
+    partner: int
+    sign: str  # "+" or "-"
+
+
+@dataclass(frozen=True, slots=True)
+class PData:
+    """An immutable, validated P-data state (use :func:`parse_p_data` or :func:`top` to make one)."""
+
+    visits: tuple[Visit, ...] = ()
+
+    @property
+    def cross(self) -> int:
+        """Number of crossings ``Cross(s)``."""
+        return len(self.visits) // 2
+
+    def to_list(self) -> list[list[Any]]:
+        return [[v.position, v.over, v.partner, v.sign] for v in self.visits]
+
+    def to_json(self) -> str:
+        """The exchange format, compact (also the canonical key)."""
+        return json.dumps(self.to_list(), separators=(",", ":"))
+
+    @property
+    def key(self) -> str:
+        """Canonical key: equal states have equal keys."""
+        return self.to_json()
+
+    def __str__(self) -> str:
+        return self.to_json()
+
+    def crossings(self) -> list[tuple[int, int, int]]:
+        """Each crossing once as ``(over_position, under_position, sign)`` with sign in {+1, -1}."""
+        out = []
+        for v in self.visits:
+            if v.over == "O":
+                out.append((v.position, v.partner, 1 if v.sign == "+" else -1))
+        return out
+
+    def mirror(self) -> PData:
+        """The state of the rope reflected y -> -y: every sign flips."""
+        return PData(tuple(v._replace(sign="-" if v.sign == "+" else "+") for v in self.visits))
+
+    def reverse(self) -> PData:
+        """The same rope walked tail -> head: positions p -> 2n+1-p; O/U and signs are kept."""
+        m = len(self.visits) + 1
+        flipped = [Visit(m - v.position, v.over, m - v.partner, v.sign) for v in self.visits]
+        return PData(tuple(sorted(flipped)))
+
+    @classmethod
+    def from_crossings(cls, crossings: Iterable[tuple[int, int, int]]) -> PData:
+        """Build from ``(over_position, under_position, sign)`` triples (validated)."""
+        visits = []
+        for over, under, sign in crossings:
+            s = "+" if sign > 0 else "-"
+            visits.append([over, "O", under, s])
+            visits.append([under, "U", over, s])
+        return parse_p_data(visits)
+
+
+EMPTY = PData(())
+
+
+def _validate(entries: Sequence[Any]) -> PData:
+    if not isinstance(entries, (list, tuple)):
+        raise PDataError(f"P-data must be a JSON list of [position, O|U, partner, +|-], got {type(entries).__name__}")
+    visits: list[Visit] = []
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, (list, tuple)) or len(entry) != 4:
+            raise PDataError(f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {entry!r}")
+        pos, over, partner, sign = entry
+        for name, value in (("position", pos), ("partner", partner)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise PDataError(f"entry {i}: {name} must be an integer, got {value!r}")
+        if over not in ("O", "U"):
+            raise PDataError(f"entry {i}: over/under must be \"O\" or \"U\", got {over!r}")
+        if sign not in ("+", "-"):
+            raise PDataError(f"entry {i}: sign must be \"+\" or \"-\", got {sign!r}")
+        visits.append(Visit(int(pos), over, int(partner), sign))
+    m = len(visits)
+    if m % 2:
+        raise PDataError(f"P-data has {m} visits; every crossing is visited twice, so the count must be even")
+    visits.sort()
+    positions = [v.position for v in visits]
+    if positions != list(range(1, m + 1)):
+        raise PDataError(f"positions must be exactly 1..{m} (each once), got {sorted(positions)}")
+    for v in visits:
+        if not 1 <= v.partner <= m:
+            raise PDataError(f"position {v.position}: partner {v.partner} is outside 1..{m}")
+        if v.partner == v.position:
+            raise PDataError(f"position {v.position}: a visit cannot be its own partner")
+        w = visits[v.partner - 1]
+        if w.partner != v.position:
+            raise PDataError(
+                f"position {v.position}: partner {v.partner} names {w.partner} as its partner, not {v.position}"
+            )
+        if w.over == v.over:
+            raise PDataError(f"positions {v.position} and {v.partner}: both are {v.over!r}; one must be O, one U")
+        if w.sign != v.sign:
+            raise PDataError(f"positions {v.position} and {v.partner}: signs differ ({v.sign} vs {w.sign})")
+    return PData(tuple(visits))
+
+
+def parse_p_data(value: str | Sequence[Any] | PData) -> PData:
+    """Parse and validate P-data given as JSON text, a list of entries, or a :class:`PData`."""
+    if isinstance(value, PData):
+        return value
+    if isinstance(value, str):
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError as exc:
+            raise PDataError(f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {value!r}") from None
+    return _validate(value)  # type: ignore[arg-type]
+
+
+def cross(p: PData) -> int:
+    """``Cross(s)``: the number of crossings."""
+    return p.cross
+
+
+def mirror(p: PData) -> PData:
+    return p.mirror()
+
+
+def reverse(p: PData) -> PData:
+    return p.reverse()
+
+
+def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def top(points: npt.ArrayLike) -> PData:
+    """``Top(q)``: P-data of a rope given its centreline points, head first, shape (N+1, 3).
+
+    Every pair of non-adjacent segments of the projection is tested for a crossing at once
+    (numpy broadcasting). A crossing's visits are placed along the rope by ``segment + t``; the
+    segment parameter interval is half-open so a crossing exactly at a joint counts once.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] < 2:
+        raise ValueError(f"points must have shape (N+1, 3), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points contain NaN or infinity")
+    start = pts[:-1]
+    d = pts[1:] - pts[:-1]
+    n_seg = len(d)
+    i_idx, j_idx = np.triu_indices(n_seg, k=2)
+    if len(i_idx) == 0:
+        return EMPTY
+    di, dj = d[i_idx, :2], d[j_idx, :2]
+    w = start[j_idx, :2] - start[i_idx, :2]
+    denom = _cross2(di, dj)
+    ok = np.abs(denom) > 1e-15
+    safe = np.where(ok, denom, 1.0)
+    t = _cross2(w, dj) / safe
+    u = _cross2(w, di) / safe
+    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    if not np.any(hit):
+        return EMPTY
+    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
+    zi = start[i_idx, 2] + t * d[i_idx, 2]
+    zj = start[j_idx, 2] + u * d[j_idx, 2]
+    i_over = zi >= zj
+    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
+    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
+    signs = np.where(_cross2(d_over, d_under) > 0, "+", "-")
+    k = len(i_idx)
+    # visit parameter along the rope; visits 0..k-1 are on segment i, k..2k-1 on segment j
+    param = np.concatenate([i_idx + t, j_idx + u])
+    order = np.argsort(param, kind="stable")
+    position = np.empty(2 * k, dtype=np.int64)
+    position[order] = np.arange(1, 2 * k + 1)
+    visits = []
+    for c in range(k):
+        pi, pj = int(position[c]), int(position[c + k])
+        oi, oj = ("O", "U") if i_over[c] else ("U", "O")
+        visits.append(Visit(pi, oi, pj, str(signs[c])))
+        visits.append(Visit(pj, oj, pi, str(signs[c])))
+    visits.sort()
+    return PData(tuple(visits))
+
+
+Top = top  # the paper's name
