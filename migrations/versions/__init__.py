@@ -1,0 +1,1 @@
+"""Alembic revisions (Alembic ignores this file; it makes the folder part of the installed package)."""

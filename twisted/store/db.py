@@ -1,0 +1,350 @@
+"""The one place that opens the database: checks, engine set-up, Alembic upgrade, sessions.
+
+``open_store(url)`` first inspects what is at ``url`` WITHOUT writing to it, and refuses (``StoreError``,
+file untouched) a file that is not an SQLite database, an SQLite/PostgreSQL database holding other
+tables but no twisted migration history, or one whose Alembic revision is unknown to this version
+(a newer schema). Only then does it create the engine and upgrade to the current heads.
+
+SQLite connections run in WAL mode with a busy timeout, so readers (a ``sqlite3`` shell,
+``twisted stats``) never block a running collector and several collectors can write the same file;
+``Store.session(write=True)`` takes the write lock up front (``BEGIN IMMEDIATE``) so a read-then-write
+transaction waits for its turn instead of failing with "database is locked".
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import Engine, create_engine, event, inspect, text
+from sqlalchemy.engine import Connection, make_url
+from sqlalchemy.engine.url import URL
+from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
+from sqlalchemy.orm import Session, sessionmaker
+
+SQLITE_BUSY_TIMEOUT_MS = 30_000
+SQLITE_HEADER = b"SQLite format 3\x00"
+# Tables an empty SQLite/PostgreSQL database may hold without being "someone else's" database.
+_HOUSEKEEPING_TABLES = {"alembic_version", "sqlite_sequence", "sqlite_stat1", "sqlite_stat4"}
+# Any fixed number: serialises concurrent migrations of one PostgreSQL database.
+_PG_MIGRATION_LOCK = 0x7477_6973  # "twis"
+
+
+class StoreError(RuntimeError):
+    """The database cannot be used; the message says which database and what to do."""
+
+
+class Store:
+    """An open twisted database: ``engine`` plus short-lived sessions."""
+
+    def __init__(self, url: URL, engine: Engine) -> None:
+        self.url = url
+        self.engine = engine
+        self._sessions = sessionmaker(bind=engine, expire_on_commit=False)
+        self._write_engine = engine.execution_options(twisted_begin_immediate=True)
+        self._write_sessions = sessionmaker(bind=self._write_engine, expire_on_commit=False)
+
+    @property
+    def dialect(self) -> str:
+        """``"sqlite"`` or ``"postgresql"``."""
+        return self.engine.dialect.name
+
+    @contextmanager
+    def session(self, write: bool = False) -> Iterator[Session]:
+        """A session committed on success and rolled back on error.
+
+        ``write=True`` takes SQLite's write lock when the transaction begins (``BEGIN IMMEDIATE``): use it
+        for short transactions that read then write, which could otherwise fail at once with "database is
+        locked" when another writer committed in between. Keep such sessions short: they hold other
+        writers back. On PostgreSQL it makes no difference.
+        """
+        maker = self._write_sessions if write else self._sessions
+        with maker() as session:
+            try:
+                yield session
+                session.commit()
+            except BaseException:
+                session.rollback()
+                raise
+
+    def close(self) -> None:
+        """Release every pooled connection."""
+        self.engine.dispose()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"Store({self.url.render_as_string(hide_password=True)!r})"
+
+
+def _display(url: URL) -> str:
+    return url.render_as_string(hide_password=True)
+
+
+def parse_url(url: str | URL) -> URL:
+    """Parse a database URL, raising :class:`StoreError` with the accepted forms when it is malformed."""
+    try:
+        parsed = make_url(url) if isinstance(url, str) else url
+    except ArgumentError as exc:
+        raise StoreError(
+            f"cannot parse database URL {url!r}: use sqlite:///path/to/file.db or "
+            "postgresql+psycopg://user@host/dbname"
+        ) from exc
+    if parsed.get_backend_name() not in ("sqlite", "postgresql"):
+        raise StoreError(
+            f"unsupported database {_display(parsed)!r}: twisted stores its data in SQLite "
+            "(sqlite:///file.db) or PostgreSQL (postgresql+psycopg://...)"
+        )
+    return parsed
+
+
+def sqlite_path(url: URL) -> Path | None:
+    """The file of an SQLite URL, or None for an in-memory database."""
+    database = url.database or ""
+    if url.get_backend_name() != "sqlite" or database in ("", ":memory:") or database.startswith("file:"):
+        return None
+    return Path(database)
+
+
+# --- inspection before any write -------------------------------------------------------------------
+
+
+def _classify(tables: set[str], revisions: list[str] | None, where: str) -> list[str]:
+    """Revisions stored in an existing database, or StoreError if it is not a twisted database.
+
+    ``revisions`` is None when the database has no ``alembic_version`` table.
+    """
+    own = tables - _HOUSEKEEPING_TABLES
+    if not revisions:
+        if own:
+            listed = ", ".join(sorted(own)[:6]) + (", ..." if len(own) > 6 else "")
+            raise StoreError(
+                f"{where} is not a twisted database (it has tables {listed} but no twisted migration "
+                "history); it was left untouched: choose another --db"
+            )
+        return []
+    known = _known_revisions()
+    unknown = [r for r in revisions if r not in known]
+    if unknown:
+        raise StoreError(
+            f"{where} has schema revision {', '.join(unknown)} that this version of twisted does not know "
+            "(a newer twisted wrote it, or it is not a twisted database); it was left untouched: upgrade "
+            "twisted or choose another --db"
+        )
+    return revisions
+
+
+def _inspect_sqlite_file(path: Path, where: str) -> list[str]:
+    """Read-only look at an existing SQLite file: its Alembic revisions (empty list = a new database)."""
+    if path.is_dir():
+        raise StoreError(f"{where} is a directory, not a database file: give a file path")
+    try:
+        with path.open("rb") as fh:
+            header = fh.read(len(SQLITE_HEADER))
+    except OSError as exc:
+        raise StoreError(f"cannot read {where}: {exc.strerror}") from exc
+    if not header:
+        return []  # an empty file is what sqlite3 itself treats as a new database
+    if header != SQLITE_HEADER:
+        raise StoreError(
+            f"{where} is not an SQLite database (it does not start with the SQLite header); it was left "
+            "untouched: choose another --db"
+        )
+    if not os.access(path, os.W_OK) or not os.access(path.parent, os.W_OK):
+        raise StoreError(
+            f"{where} is not writable (the file and its directory must be writable: SQLite keeps its "
+            "write-ahead log beside the file)"
+        )
+    # mode=ro never writes the database. A WAL-mode file without its -wal companion is complete on disk,
+    # and immutable=1 then keeps SQLite from creating -wal/-shm files beside it; while a -wal exists (a
+    # writer may be running) a plain read-only connection reads the latest commits.
+    uri = f"{path.resolve().as_uri()}?mode=ro"
+    with path.open("rb") as fh:
+        wal_mode = fh.read(20)[18:20] == b"\x02\x02"
+    if wal_mode and not Path(f"{path}-wal").exists():
+        uri += "&immutable=1"
+    try:
+        conn = sqlite3.connect(uri, uri=True, timeout=30)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot open {where}: {exc}") from exc
+    try:
+        tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        revisions = None
+        if "alembic_version" in tables:
+            revisions = [row[0] for row in conn.execute("SELECT version_num FROM alembic_version")]
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"{where} is not a readable SQLite database ({exc}); it was left untouched") from exc
+    finally:
+        conn.close()
+    return _classify(tables, revisions, where)
+
+
+def _check_new_sqlite_path(path: Path, where: str) -> None:
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.exists():
+        raise StoreError(f"cannot create {where}: directory {str(parent)!r} does not exist")
+    if not parent.is_dir():
+        raise StoreError(f"cannot create {where}: {str(parent)!r} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise StoreError(f"cannot create {where}: directory {str(parent)!r} is not writable")
+
+
+def _inspect_connection(conn: Connection, where: str) -> list[str]:
+    tables = set(inspect(conn).get_table_names())
+    revisions = None
+    if "alembic_version" in tables:
+        revisions = [row[0] for row in conn.execute(text("SELECT version_num FROM alembic_version"))]
+    return _classify(tables, revisions, where)
+
+
+# --- engine -------------------------------------------------------------------------------------------
+
+
+def _sqlite_on_connect(dbapi_connection: Any, _record: Any) -> None:
+    # Let SQLAlchemy's "begin" event issue BEGIN itself (pysqlite's implicit BEGIN cannot be IMMEDIATE
+    # and does not cover DDL, which Alembic needs to be transactional).
+    dbapi_connection.isolation_level = None
+    cursor = dbapi_connection.cursor()
+    try:
+        cursor.execute(f"PRAGMA busy_timeout = {SQLITE_BUSY_TIMEOUT_MS}")
+        cursor.execute("PRAGMA journal_mode = WAL")
+        # In WAL mode NORMAL is still safe against a killed process (only an OS crash can lose the latest
+        # commits) and saves an fsync per commit.
+        cursor.execute("PRAGMA synchronous = NORMAL")
+        cursor.execute("PRAGMA foreign_keys = ON")
+    finally:
+        cursor.close()
+
+
+def _sqlite_on_begin(conn: Connection) -> None:
+    immediate = conn.get_execution_options().get("twisted_begin_immediate", False)
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
+
+
+def make_engine(url: URL) -> Engine:
+    """Create the engine with twisted's connection settings (SQLite: WAL, busy timeout, foreign keys)."""
+    kwargs: dict[str, Any] = {}
+    if url.get_backend_name() == "sqlite":
+        kwargs["connect_args"] = {"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}
+    else:
+        kwargs["pool_pre_ping"] = True
+    try:
+        engine = create_engine(url, **kwargs)
+    except (ArgumentError, NoSuchModuleError, ImportError) as exc:
+        raise StoreError(f"cannot use database {_display(url)!r}: {exc}") from exc
+    if url.get_backend_name() == "sqlite":
+        event.listen(engine, "connect", _sqlite_on_connect)
+        event.listen(engine, "begin", _sqlite_on_begin)
+    return engine
+
+
+# --- Alembic -------------------------------------------------------------------------------------------
+
+
+def alembic_config(connection: Connection | None = None) -> Any:
+    """An Alembic ``Config`` pointing at the installed ``migrations`` package (no alembic.ini needed)."""
+    from alembic.config import Config
+
+    import migrations
+
+    config = Config()
+    # __path__ rather than __file__: an editable install made before migrations/__init__.py existed
+    # exposes it as a namespace package.
+    config.set_main_option("script_location", str(Path(next(iter(migrations.__path__))).resolve()))
+    if connection is not None:
+        config.attributes["connection"] = connection
+    return config
+
+
+def _script_directory() -> Any:
+    from alembic.script import ScriptDirectory
+
+    return ScriptDirectory.from_config(alembic_config())
+
+
+def _known_revisions() -> set[str]:
+    return {script.revision for script in _script_directory().walk_revisions()}
+
+
+def head_revisions() -> set[str]:
+    """The current heads of twisted's migrations (one per area branch)."""
+    return set(_script_directory().get_heads())
+
+
+def _upgrade(engine: Engine, url: URL) -> None:
+    from alembic import command
+
+    heads = head_revisions()
+    where = _display(url)
+    sqlite = url.get_backend_name() == "sqlite"
+    with engine.connect() as conn:
+        raw: Any = conn.connection.driver_connection
+        if sqlite:
+            # Batch-mode migrations rebuild tables (copy, drop, rename): SQLite's documented procedure
+            # needs foreign keys off, and the pragma only takes effect outside a transaction.
+            raw.execute("PRAGMA foreign_keys = OFF")
+        try:
+            conn.execution_options(twisted_begin_immediate=True)
+            with conn.begin():
+                # Re-check under the write lock: another process may have created or upgraded it meanwhile.
+                if not sqlite:
+                    conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": _PG_MIGRATION_LOCK})
+                current = set(_inspect_connection(conn, where))
+                if current == heads:
+                    return
+                command.upgrade(alembic_config(conn), "heads")
+                if sqlite:
+                    broken = conn.exec_driver_sql("PRAGMA foreign_key_check").fetchall()
+                    if broken:
+                        raise StoreError(f"migration of {where} broke foreign keys: {broken[:5]}")
+        finally:
+            if sqlite:
+                raw.execute("PRAGMA foreign_keys = ON")
+
+
+def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True) -> Store:
+    """Open (creating if new and ``create``) the twisted database at ``url`` and upgrade it to the heads.
+
+    ``upgrade=False`` only checks (for Alembic run by hand). Raises :class:`StoreError`, leaving whatever
+    is at ``url`` untouched, when the URL is malformed, the path cannot be created or written, the file is
+    not a twisted database, or its schema is newer.
+    """
+    parsed = parse_url(url)
+    where = f"database {_display(parsed)!r}"
+    heads = head_revisions()
+    path = sqlite_path(parsed)
+    current: list[str] | None = None
+    if path is not None:
+        where = f"database file {str(path)!r}"
+        if path.exists():
+            current = _inspect_sqlite_file(path, where)
+        elif not create:
+            raise StoreError(f"{where} does not exist (run `twisted collect` first, or check --db)")
+        else:
+            _check_new_sqlite_path(path, where)
+    engine = make_engine(parsed)
+    try:
+        if current is None:
+            # PostgreSQL / in-memory SQLite: inspect through the engine (read-only queries).
+            try:
+                with engine.connect() as conn:
+                    current = _inspect_connection(conn, where)
+            except DBAPIError as exc:
+                raise StoreError(f"cannot connect to {where}: {exc.orig}") from exc
+        if upgrade and set(current) != heads:
+            try:
+                _upgrade(engine, parsed)
+            except DBAPIError as exc:
+                raise StoreError(f"cannot create or upgrade {where}: {exc.orig}") from exc
+    except BaseException:
+        engine.dispose()
+        raise
+    return Store(parsed, engine)
