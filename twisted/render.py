@@ -1,0 +1,390 @@
+"""Pictures of the rope: a top view (MuJoCo offscreen), knot diagrams, Gauss diagrams, plan replays.
+
+Researchers look before they read. Three kinds of picture:
+
+- **Knot diagram** of a rope given by its 22 centreline points: the projection to the table as a
+  line, broken where it passes *under* another strand, every crossing visit numbered as in P-data
+  (``3O+`` = visit 3, over, positive crossing). Drawn from the same segment intersection test as
+  :func:`twisted.topology.top`, so the numbers on the picture are the numbers in the state.
+- **Gauss diagram** of a P-data state without a configuration (an unseen goal): the rope as a
+  straight line from head to tail, visits 1..2n along it, one chord per crossing drawn as an
+  arrow from its over visit to its under visit, coloured by sign. It is the exact content of the
+  P-data; an actual planar layout of an arbitrary state is not computed here.
+- **Top view** rendered by MuJoCo (EGL or OSMesa). OpenGL is chosen when ``mujoco`` is imported,
+  and in a headless shell the default (GLFW) fails, so the offscreen rendering runs in a child
+  interpreter started with ``MUJOCO_GL`` set (``egl`` first, then ``osmesa``). When neither works
+  the knot diagram of the link points is the picture (the fallback).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never a window
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import numpy.typing as npt  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Arc, FancyArrowPatch  # noqa: E402
+
+from twisted.topology import PData, Visit  # noqa: E402
+
+__all__ = [
+    "CrossingDrawing",
+    "GL_BACKENDS",
+    "crossing_geometry",
+    "draw_gauss_diagram",
+    "draw_knot_diagram",
+    "gl_top_views",
+    "save_gif",
+    "save_png",
+]
+
+GL_BACKENDS = ("egl", "osmesa")
+ROPE_COLOUR = "#8c510a"
+SIGN_COLOUR = {"+": "#1b7837", "-": "#762a83"}
+_GAP_M = 0.025  # half-length of the break in an under strand, about one link radius + margin
+
+
+@dataclass(frozen=True)
+class CrossingDrawing:
+    """Where one crossing is on the table and which visits of the P-data it carries."""
+
+    xy: tuple[float, float]
+    over_segment: int
+    over_t: float
+    under_segment: int
+    under_t: float
+    over_visit: int
+    under_visit: int
+    sign: str  # "+" or "-"
+
+
+def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def crossing_geometry(points: npt.ArrayLike) -> list[CrossingDrawing]:
+    """The crossings of a projected rope with their positions and visit numbers.
+
+    Same test and numbering as :func:`twisted.topology.top` (half-open segment parameters, visits
+    ordered by ``segment + t``), so :func:`p_data_of_drawing` of the result equals ``top(points)``.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    start, d = pts[:-1], pts[1:] - pts[:-1]
+    i_idx, j_idx = np.triu_indices(len(d), k=2)
+    di, dj = d[i_idx, :2], d[j_idx, :2]
+    w = start[j_idx, :2] - start[i_idx, :2]
+    denom = _cross2(di, dj)
+    ok = np.abs(denom) > 1e-15
+    safe = np.where(ok, denom, 1.0)
+    t = _cross2(w, dj) / safe
+    u = _cross2(w, di) / safe
+    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
+    k = len(i_idx)
+    param = np.concatenate([i_idx + t, j_idx + u])
+    order = np.argsort(param, kind="stable")
+    position = np.empty(2 * k, dtype=np.int64)
+    position[order] = np.arange(1, 2 * k + 1)
+    out = []
+    for c in range(k):
+        i, j, ti, uj = int(i_idx[c]), int(j_idx[c]), float(t[c]), float(u[c])
+        zi = start[i, 2] + ti * d[i, 2]
+        zj = start[j, 2] + uj * d[j, 2]
+        xy = start[i, :2] + ti * d[i, :2]
+        if zi >= zj:
+            over = (i, ti, int(position[c]))
+            under = (j, uj, int(position[c + k]))
+        else:
+            over = (j, uj, int(position[c + k]))
+            under = (i, ti, int(position[c]))
+        sign = "+" if _cross2(d[over[0], :2], d[under[0], :2]) > 0 else "-"
+        out.append(
+            CrossingDrawing(
+                xy=(float(xy[0]), float(xy[1])),
+                over_segment=over[0],
+                over_t=over[1],
+                under_segment=under[0],
+                under_t=under[1],
+                over_visit=over[2],
+                under_visit=under[2],
+                sign=sign,
+            )
+        )
+    return out
+
+
+def p_data_of_drawing(crossings: Sequence[CrossingDrawing]) -> PData:
+    """The P-data a drawing shows (used to check that the picture tells the truth)."""
+    visits = []
+    for c in crossings:
+        visits.append(Visit(c.over_visit, "O", c.under_visit, c.sign))
+        visits.append(Visit(c.under_visit, "U", c.over_visit, c.sign))
+    return PData(tuple(sorted(visits)))
+
+
+def _arc_length(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    seg = np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def _piece(points: npt.NDArray[np.float64], s0: float, s1: float) -> npt.NDArray[np.float64]:
+    """The projected polyline between arc lengths s0 < s1 (clipped to the rope)."""
+    s = _arc_length(points)
+    s0, s1 = max(s0, 0.0), min(s1, float(s[-1]))
+    inner = (s > s0) & (s < s1)
+    xs = np.interp(np.concatenate([[s0], s[inner], [s1]]), s, points[:, 0])
+    ys = np.interp(np.concatenate([[s0], s[inner], [s1]]), s, points[:, 1])
+    return np.stack([xs, ys], axis=1)
+
+
+def draw_knot_diagram(
+    ax: Axes, points: npt.ArrayLike, *, title: str | None = None, label_visits: bool = True
+) -> list[CrossingDrawing]:
+    """Draw the rope from above as a knot diagram: gaps at under-crossings, visits numbered.
+
+    Returns the crossings drawn. The head (link-0 tip) is a filled dot, the tail a ring.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    s = _arc_length(pts)
+    crossings = crossing_geometry(pts)
+    # The under strand is drawn in pieces that stop short of each under-crossing.
+    under_at = sorted(
+        s[c.under_segment] + c.under_t * (s[c.under_segment + 1] - s[c.under_segment]) for c in crossings
+    )
+    cuts = [0.0]
+    for sc in under_at:
+        cuts += [sc - _GAP_M, sc + _GAP_M]
+    cuts.append(float(s[-1]))
+    for a, b in zip(cuts[0::2], cuts[1::2], strict=True):
+        if b > a:
+            piece = _piece(pts, a, b)
+            ax.plot(piece[:, 0], piece[:, 1], color=ROPE_COLOUR, lw=4, solid_capstyle="round", zorder=2)
+    ax.plot(pts[0, 0], pts[0, 1], "o", color="black", ms=8, zorder=4, label="head (link 0)")
+    ax.plot(pts[-1, 0], pts[-1, 1], "o", mfc="white", mec="black", ms=8, zorder=4, label="tail (link 20)")
+    if label_visits:
+        span = float(np.ptp(pts[:, :2], axis=0).max()) or 1.0
+        off = 0.045 * span
+        for c in crossings:
+            x, y = c.xy
+            ax.plot(x, y, ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
+            for seg, visit, kind, sgn in (
+                (c.over_segment, c.over_visit, "O", 1),
+                (c.under_segment, c.under_visit, "U", -1),
+            ):
+                # Put each visit's label beside its own strand, on the normal of that strand.
+                dxy = pts[seg + 1, :2] - pts[seg, :2]
+                n = np.array([-dxy[1], dxy[0]]) / (np.linalg.norm(dxy) or 1.0)
+                ax.annotate(
+                    f"{visit}{kind}{c.sign}",
+                    (x + sgn * off * n[0], y + sgn * off * n[1]),
+                    ha="center",
+                    va="center",
+                    fontsize=8,
+                    color=SIGN_COLOUR[c.sign],
+                    zorder=6,
+                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
+                )
+    ax.set_aspect("equal")
+    ax.margins(0.12)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best", fontsize=7, frameon=False)
+    if title:
+        ax.set_title(title, fontsize=9)
+    return crossings
+
+
+def draw_gauss_diagram(ax: Axes, p_data: PData, *, title: str | None = None) -> None:
+    """Draw a P-data state as a Gauss diagram of the open rope (exact, no layout guessed).
+
+    Visits 1..2n sit on the rope (a straight line, head left); each crossing is an arc above the
+    line from its over visit to its under visit, with an arrow head at the under end, green for
+    ``+`` and purple for ``-``.
+    """
+    m = len(p_data.visits)
+    ax.plot([0, m + 1], [0, 0], color=ROPE_COLOUR, lw=4, solid_capstyle="round", zorder=2)
+    ax.plot(0, 0, "o", color="black", ms=8, zorder=4)
+    ax.plot(m + 1, 0, "o", mfc="white", mec="black", ms=8, zorder=4)
+    ax.annotate("head", (0, -0.25), ha="center", va="top", fontsize=8)
+    ax.annotate("tail", (m + 1, -0.25), ha="center", va="top", fontsize=8)
+    top = 0.5
+    for over, under, sign in p_data.crossings():
+        s = "+" if sign > 0 else "-"
+        colour = SIGN_COLOUR[s]
+        a, b = sorted((over, under))
+        width = b - a
+        ax.add_patch(
+            Arc(((a + b) / 2, 0), width, width, theta1=0, theta2=180, color=colour, lw=1.8, zorder=3)
+        )
+        top = max(top, width / 2)
+        # arrow head at the under visit, along the arc's tangent (vertical at the line)
+        ax.add_patch(
+            FancyArrowPatch(
+                (under, 0.12 * max(width, 1)),
+                (under, 0.02),
+                arrowstyle="-|>",
+                mutation_scale=12,
+                color=colour,
+                zorder=4,
+            )
+        )
+        ax.annotate(s, ((a + b) / 2, width / 2 + 0.08), ha="center", va="bottom", fontsize=10, color=colour)
+    for v in p_data.visits:
+        ax.plot(v.position, 0, "o", color=SIGN_COLOUR[v.sign], ms=6, zorder=5)
+        ax.annotate(f"{v.position}{v.over}", (v.position, -0.12), ha="center", va="top", fontsize=9)
+    ax.set_xlim(-0.6, m + 1.6)
+    ax.set_ylim(-0.8, top + 0.6)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    ax.set_title(title or f"Gauss diagram (arrow: over -> under)\n{p_data.key}", fontsize=8)
+
+
+def save_png(fig: Figure, path: str | Path, dpi: int = 120) -> Path:
+    """Save a figure as PNG (creating the folder) and close it."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return out
+
+
+def figure_to_array(fig: Figure, dpi: int = 100) -> npt.NDArray[np.uint8]:
+    """Rasterise a figure to an RGB uint8 array (for GIF frames); closes the figure."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    buf.seek(0)
+    from PIL import Image
+
+    return np.asarray(Image.open(buf).convert("RGB"))
+
+
+def save_gif(frames: Sequence[npt.NDArray[np.uint8]], path: str | Path, frame_s: float = 0.5) -> Path:
+    """Write RGB frames as an animated GIF (looping); frames are padded to a common size."""
+    from PIL import Image
+
+    if not frames:
+        raise ValueError("no frames to write")
+    h = max(f.shape[0] for f in frames)
+    w = max(f.shape[1] for f in frames)
+    images = []
+    for f in frames:
+        canvas = np.full((h, w, 3), 255, dtype=np.uint8)
+        canvas[: f.shape[0], : f.shape[1]] = f[..., :3]
+        images.append(Image.fromarray(canvas))
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    images[0].save(
+        out, save_all=True, append_images=images[1:], duration=int(frame_s * 1000), loop=0, optimize=False
+    )
+    return out
+
+
+# ---------------------------------------------------------------- MuJoCo offscreen top view
+
+
+def gl_top_views(
+    states: Sequence[npt.NDArray[np.float64]],
+    *,
+    friction_scale: float = 1.0,
+    width: int = 640,
+    height: int = 480,
+    backends: Sequence[str] | None = None,
+    timeout_s: float = 300.0,
+) -> tuple[list[npt.NDArray[np.uint8]] | None, str]:
+    """Render rope states (``RopeSim.state()`` vectors) from above with MuJoCo offscreen OpenGL.
+
+    Returns ``(images, backend)``; ``images`` is None when no backend works, and then ``backend``
+    says why (the caller draws the link points instead). Tried in order: ``MUJOCO_GL`` if set,
+    then EGL, then OSMesa, each in a child interpreter so the choice does not depend on whether
+    this process already imported MuJoCo.
+    """
+    if backends is None:
+        env_gl = os.environ.get("MUJOCO_GL", "").lower().strip()
+        backends = (
+            [env_gl] + [b for b in GL_BACKENDS if b != env_gl] if env_gl in GL_BACKENDS else list(GL_BACKENDS)
+        )
+    errors = []
+    with tempfile.TemporaryDirectory(prefix="twisted-render-") as tmp:
+        src = Path(tmp) / "states.npz"
+        np.savez(src, states=np.stack([np.asarray(s, dtype=np.float64) for s in states]))
+        for backend in backends:
+            dst = Path(tmp) / f"images-{backend}.npz"
+            env = dict(os.environ, MUJOCO_GL=backend)
+            env.pop("PYOPENGL_PLATFORM", None)  # let mujoco's egl/osmesa module pick the matching one
+            cmd = [
+                sys.executable,
+                "-m",
+                "twisted.render",
+                str(src),
+                str(dst),
+                str(friction_scale),
+                str(width),
+                str(height),
+            ]
+            try:
+                proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                errors.append(f"{backend}: timed out")
+                continue
+            if proc.returncode == 0 and dst.exists():
+                with np.load(dst) as data:
+                    return list(data["images"]), backend
+            tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+            errors.append(f"{backend}: {tail}")
+    return None, "; ".join(errors)
+
+
+def _top_camera(points: npt.NDArray[np.float64], aspect: float) -> Any:
+    import mujoco
+
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre = (lo + hi) / 2
+    cam.lookat[:] = [centre[0], centre[1], 0.0]
+    half = max((hi[0] - lo[0]) / 2 / aspect, (hi[1] - lo[1]) / 2, 0.15) + 0.08
+    cam.distance = half / np.tan(np.radians(45.0 / 2))  # MuJoCo's default vertical field of view is 45 deg
+    cam.elevation = -90.0
+    cam.azimuth = 90.0  # +x to the right, +y up in the image
+    return cam
+
+
+def _gl_worker(src: str, dst: str, friction_scale: float, width: int, height: int) -> None:
+    """Child-process side of :func:`gl_top_views` (``MUJOCO_GL`` is already set here)."""
+    import mujoco
+
+    from twisted.sim import RopeSim
+
+    sim = RopeSim(friction_scale=friction_scale)
+    model, data = sim.model, sim.data
+    model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
+    model.vis.global_.offheight = max(model.vis.global_.offheight, height)
+    images = []
+    with np.load(src) as f:
+        states = f["states"]
+    with mujoco.Renderer(model, height=height, width=width) as renderer:
+        for state in states:
+            sim.set_state(state)
+            cam = _top_camera(sim.link_points(), width / height)
+            renderer.update_scene(data, camera=cam)
+            images.append(renderer.render().copy())
+    np.savez(dst, images=np.stack(images))
+
+
+if __name__ == "__main__":
+    _gl_worker(sys.argv[1], sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5]))
