@@ -1,0 +1,436 @@
+"""High level of TWISTED: R1 / R2 / Cross moves on the P-data of an open rope, and BFS plans.
+
+Every move happens inside one face of the rope's planar diagram (:mod:`twisted.diagram`) and adds
+crossings; none removes any (the paper has no undo moves). A move inserts new visits into the
+segments it touches and keeps every old crossing with its order along the rope, O/U and sign.
+
+Sign rule used throughout: a strand X crossing a strand B from B's left to B's right gives
+``+`` when X is over and ``-`` when X is under; from right to left the signs swap. (With B along
++x, "left to right" means X runs along -y: ``(0,-1) x (1,0) = +1`` when X is over.)
+
+R1(segment k, side, sign). A small curl on segment k lying in the face on the given side of k.
+A curl on the right turns clockwise, one on the left counter-clockwise; with its first visit over,
+a clockwise curl has sign + and a counter-clockwise one sign -. So (side, sign) fixes the O/U of the
+two new consecutive visits, and the four choices give four different states: 4 x (2n+1) moves.
+
+R2(strand E on segment a, side sa; strand F on segment b, side sb; E over or under). Two pieces of
+rope that bound a common face through the sides sa, sb are pushed across each other inside that
+face, making a bigon: two new crossings of opposite sign. E is the piece met first along the rope
+(a <= b). Working the geometry out (drawings in tests/test_moves.py) gives:
+  - the two crossings are met in the same order along F as along E when sa != sb (the pieces run
+    "parallel" around the face) and in reverse order when sa == sb ("antiparallel", the hairpin);
+  - E's first new visit crosses F coming from F's side sb, so its sign follows the rule above.
+Which pieces may be paired: any two sides of one face, a side with itself (two pieces of one
+segment side, e.g. a hairpin folded from one straight piece), and for a segment with both sides on
+one face (an end segment, or a bridge) its left with its right side, in both assignments.
+The reference also demanded that both rope ends lie in one face. We do not: a face is a disc on
+the sphere, so a path from one side to the other always exists inside it and the rope ends have
+no say (see ``test_r2_needs_no_common_face_for_the_rope_ends``). From the empty rope this gives
+8 R2 moves where the reference had 4: it allowed only the hairpin (sa == sb); the 4 "parallel"
+ones (an S-shape pushed together around a rope end) are R2 moves of the topology as well.
+
+Cross(end segment e, segment b, side sb, over/under). The rope tip of the end segment e moves
+across segment b, a segment of the face that e lies in, coming from b's side sb. The new visit on
+e is at the tip end of e (the new first visit for the head, the new last for the tail), and the
+sign is forced: walking head -> tail the head enters the face across b (from the far side to sb),
+the tail leaves it (from sb to the far side). When b is also an end segment both sides of b are in
+the face, so both signs occur. The tip crossing its own end segment is a curl at the tip, which
+is exactly R1 on that end segment, so it is left to R1 (hence no Cross from the empty rope).
+
+Why the moves reach every state (and the enumeration counts). Retracting the head tip past its
+first crossing undoes a Cross (or an R1 on segment 0), so every planar P-data with n crossings is
+one move away from one with n-1. Hence enumerating by moves from the empty rope reaches exactly the
+planar P-data: 4, 40, 528 and 7,968 states with 1, 2, 3 and 4 crossings, the reference's numbers
+(``test_enumeration_is_exactly_the_planar_p_data`` checks this against brute force).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any, Literal
+
+from twisted.diagram import LEFT, RIGHT, Diagram, diagram
+from twisted.topology import EMPTY, PData, PDataError, Visit, parse_p_data
+
+__all__ = [
+    "DEFAULT_PLAN_LIMIT",
+    "Move",
+    "Plan",
+    "Successor",
+    "enumerate_states",
+    "explains",
+    "plans",
+    "successors",
+    "sub_states",
+]
+
+MoveKind = Literal["R1", "R2", "Cross"]
+
+DEFAULT_PLAN_LIMIT = 100
+
+
+@dataclass(frozen=True, slots=True)
+class Move:
+    """One high-level move, with what a plan needs to say how to make it.
+
+    - ``R1``: ``segment`` gets a curl on ``side`` (``"L"``/``"R"``) with crossing ``sign``;
+      ``over`` is the O/U of the curl's first visit (implied by side and sign).
+    - ``R2``: the piece on ``segment`` (met first along the rope), seen from its ``side``, and the
+      piece on ``other_segment``, seen from ``other_side``, are pushed across each other; ``over``
+      is ``"O"`` when the first piece ends on top; ``sign`` is that of the first new crossing.
+    - ``Cross``: the tip of end segment ``segment`` is laid over (``over="O"``) or under
+      (``"U"``) ``other_segment``, arriving from its ``other_side``; ``sign`` is forced by that.
+
+    Segments are numbered in the state the move starts from.
+    """
+
+    kind: MoveKind
+    segment: int
+    side: str | None = None
+    sign: str | None = None
+    over: str | None = None
+    other_segment: int | None = None
+    other_side: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict; fields that do not apply to this kind are left out."""
+        out: dict[str, Any] = {"kind": self.kind, "segment": self.segment}
+        for name in ("side", "other_segment", "other_side", "over", "sign"):
+            value = getattr(self, name)
+            if value is not None:
+                out[name] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Move:
+        return cls(
+            kind=d["kind"],
+            segment=d["segment"],
+            side=d.get("side"),
+            sign=d.get("sign"),
+            over=d.get("over"),
+            other_segment=d.get("other_segment"),
+            other_side=d.get("other_side"),
+        )
+
+    def __str__(self) -> str:
+        args = ", ".join(f"{k}={v}" for k, v in self.to_dict().items() if k != "kind")
+        return f"{self.kind}({args})"
+
+
+@dataclass(frozen=True, slots=True)
+class Successor:
+    """A state one move away, and the move."""
+
+    state: PData
+    move: Move
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A high-level plan: ``states[0]`` is the start, ``states[-1]`` the goal, ``moves[i]`` takes
+    ``states[i]`` to ``states[i + 1]``."""
+
+    states: list[PData]
+    moves: list[Move] = field(default_factory=list)
+
+    @property
+    def length(self) -> int:
+        return len(self.moves)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: states as P-data lists, moves as dicts."""
+        return {
+            "length": self.length,
+            "states": [s.to_list() for s in self.states],
+            "moves": [m.to_dict() for m in self.moves],
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Plan:
+        return cls([parse_p_data(s) for s in d["states"]], [Move.from_dict(m) for m in d["moves"]])
+
+
+# ---------------------------------------------------------------------------------------------
+# building a successor: insert new visits into segments
+
+# Visits are shared between states (there are few distinct ones), which keeps cached states small.
+_VISITS: dict[tuple[int, str, int, str], Visit] = {}
+
+
+def _visit(position: int, over: str, partner: int, sign: str) -> Visit:
+    key = (position, over, partner, sign)
+    v = _VISITS.get(key)
+    if v is None:
+        v = _VISITS[key] = Visit(position, over, partner, sign)
+    return v
+
+
+# A new visit to insert: (crossing id, "O"|"U", sign). Crossing ids are local to one move.
+_NewVisit = tuple[int, str, str]
+
+
+def _insert(p: PData, inserts: dict[int, list[_NewVisit]]) -> PData:
+    """``p`` with new visits inserted: ``inserts[k]`` lists those on segment k in rope order."""
+    old = p.visits
+    n_old = len(old)
+    new_position = [0] * (n_old + 1)  # old position -> new position
+    placed: dict[int, list[tuple[int, str, str]]] = {}  # crossing id -> [(position, O/U, sign)]
+    pos = 0
+    for k in range(n_old + 1):
+        for cid, over, sign in inserts.get(k, ()):
+            pos += 1
+            placed.setdefault(cid, []).append((pos, over, sign))
+        if k < n_old:
+            pos += 1
+            new_position[k + 1] = pos
+    out: list[Visit | None] = [None] * pos
+    for v in old:
+        np_ = new_position[v.position]
+        out[np_ - 1] = _visit(np_, v.over, new_position[v.partner], v.sign)
+    for (pa, oa, sa), (pb, ob, sb) in placed.values():
+        out[pa - 1] = _visit(pa, oa, pb, sa)
+        out[pb - 1] = _visit(pb, ob, pa, sb)
+    return PData(tuple(out))  # type: ignore[arg-type]
+
+
+def _flip(over: str) -> str:
+    return "U" if over == "O" else "O"
+
+
+def _crossing_sign(x_over: bool, left_to_right: bool) -> str:
+    """Sign of a crossing where strand X crosses strand B from B's left to right (or back)."""
+    return "+" if x_over == left_to_right else "-"
+
+
+# ---------------------------------------------------------------------------------------------
+# the three moves
+
+
+def _r1_moves(p: PData) -> Iterator[Successor]:
+    for k in range(2 * p.cross + 1):
+        for side in (LEFT, RIGHT):
+            for sign in ("+", "-"):
+                # clockwise (right) curl: first visit over <=> +; counter-clockwise: over <=> -
+                first = "O" if (sign == "+") == (side == RIGHT) else "U"
+                state = _insert(p, {k: [(0, first, sign), (0, _flip(first), sign)]})
+                yield Successor(state, Move("R1", k, side=side, sign=sign, over=first))
+
+
+def _r2_state(p: PData, a: int, sa: str, b: int, sb: str, e_over: bool) -> tuple[PData, str]:
+    """Push the piece on segment a (side sa) and the later piece on b (side sb) across each other."""
+    e_mark = "O" if e_over else "U"
+    f_mark = _flip(e_mark)
+    # E's first visit crosses F coming from F's side sb
+    s1 = _crossing_sign(e_over, left_to_right=(sb == LEFT))
+    s2 = "-" if s1 == "+" else "+"
+    e_visits: list[_NewVisit] = [(0, e_mark, s1), (1, e_mark, s2)]
+    # same order along F when the sides differ, reversed (nested) when they agree
+    f_visits: list[_NewVisit] = [(0, f_mark, s1), (1, f_mark, s2)]
+    if sa == sb:
+        f_visits.reverse()
+    if a == b:
+        inserts = {a: e_visits + f_visits}
+    else:
+        inserts = {a: e_visits, b: f_visits}
+    return _insert(p, inserts), s1
+
+
+def _r2_moves(p: PData, d: Diagram) -> Iterator[Successor]:
+    for face in d.faces:
+        sides = sorted(face.sides)
+        for i, (a, sa) in enumerate(sides):
+            for b, sb in sides[i:]:
+                if a == b and sa != sb:
+                    # both sides of one segment on this face: either piece may face either way
+                    pairs = [(sa, sb), (sb, sa)]
+                else:
+                    pairs = [(sa, sb)]
+                for s_first, s_second in pairs:
+                    for e_over in (True, False):
+                        state, s1 = _r2_state(p, a, s_first, b, s_second, e_over)
+                        move = Move(
+                            "R2",
+                            a,
+                            side=s_first,
+                            sign=s1,
+                            over="O" if e_over else "U",
+                            other_segment=b,
+                            other_side=s_second,
+                        )
+                        yield Successor(state, move)
+
+
+def _cross_moves(p: PData, d: Diagram) -> Iterator[Successor]:
+    last = 2 * p.cross
+    ends = (0,) if last == 0 else (0, last)
+    for e in ends:
+        face = d.faces[d.face_of(e, LEFT)]
+        head = e == 0
+        for b, sb in sorted(face.sides):
+            if b == e:
+                continue  # the tip across its own segment is an R1 curl on it
+            for end_over in (True, False):
+                # head -> tail, the head enters the face across b, the tail leaves it
+                left_to_right = (sb == RIGHT) if head else (sb == LEFT)
+                sign = _crossing_sign(end_over, left_to_right)
+                tip: _NewVisit = (0, "O" if end_over else "U", sign)
+                crossed: _NewVisit = (0, "U" if end_over else "O", sign)
+                if head:
+                    inserts = {0: [tip], b: [crossed]}
+                else:
+                    inserts = {b: [crossed], last: [tip]}
+                move = Move("Cross", e, sign=sign, over=tip[1], other_segment=b, other_side=sb)
+                yield Successor(_insert(p, inserts), move)
+
+
+@lru_cache(maxsize=4096)
+def _successors(p: PData) -> tuple[Successor, ...]:
+    d = diagram(p)
+    return (*_r1_moves(p), *_r2_moves(p, d), *_cross_moves(p, d))
+
+
+def successors(p: PData) -> list[Successor]:
+    """All moves from ``p`` with the state each makes, in a fixed order (R1, R2, Cross).
+
+    Different moves can make the same state (e.g. the head laid over the tail, or the tail over
+    the head); they are all listed. Raises :class:`PDataError` if ``p`` cannot be drawn.
+    """
+    return list(_successors(p))
+
+
+def successor_states(p: PData) -> list[PData]:
+    """The distinct states one move away, in first-seen order."""
+    return list(dict.fromkeys(s.state for s in _successors(p)))
+
+
+def explains(start: PData, end: PData) -> Move | None:
+    """The first move taking ``start`` to ``end``, or None when no single move does."""
+    if end.cross <= start.cross or end.cross > start.cross + 2:
+        return None
+    for s in _successors(start):
+        if s.state == end:
+            return s.move
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# enumeration and BFS plans
+
+
+def enumerate_states(max_crosses: int) -> dict[int, list[PData]]:
+    """Every state reachable from the empty rope with at most ``max_crosses`` crossings, by moves.
+
+    Returns ``{cross: states sorted by key}`` for cross = 0..max_crosses.
+    """
+    if max_crosses < 0:
+        raise ValueError(f"max_crosses must be >= 0, got {max_crosses}")
+    layers: dict[int, set[PData]] = {c: set() for c in range(max_crosses + 1)}
+    layers[0].add(EMPTY)
+    # moves only add crossings, so expanding layer by layer visits every state once
+    for c in range(max_crosses):
+        for p in layers[c]:
+            for s in _successors(p):
+                if s.state.cross <= max_crosses:
+                    layers[s.state.cross].add(s.state)
+    return {c: sorted(layers[c], key=lambda p: p.key) for c in layers}
+
+
+def sub_states(goal: PData) -> frozenset[PData]:
+    """Every state obtained from ``goal`` by deleting some of its crossings (both visits).
+
+    Moves insert visits and keep the old crossings untouched, so a state can lead to ``goal`` only
+    if it is one of these: the BFS explores nothing else.
+    """
+    crossings = goal.crossings()
+    n = len(crossings)
+    out = set()
+    for mask in range(1 << n):
+        kept = sorted(pos for i, (o, u, _) in enumerate(crossings) if mask >> i & 1 for pos in (o, u))
+        renumber = {old: new for new, old in enumerate(kept, start=1)}
+        visits = tuple(
+            _visit(renumber[pos], v.over, renumber[v.partner], v.sign)
+            for pos in kept
+            for v in (goal.visits[pos - 1],)
+        )
+        out.add(PData(visits))
+    return frozenset(out)
+
+
+def plans(start: PData, goal: PData, limit: int = DEFAULT_PLAN_LIMIT) -> list[Plan]:
+    """Move sequences from ``start`` to ``goal``, shortest first, at most ``limit`` of them.
+
+    BFS over moves that prunes every state with ``Cross >= Cross(goal)`` other than the goal; the
+    comparison uses absolute crossing counts, so it works from any start state. Plans differ in
+    their state sequences; where several moves make the same step, the plan names the first (all
+    of them are in :func:`successors`). An unreachable goal gives ``[]``.
+    """
+    if limit < 1:
+        raise ValueError(f"limit must be >= 1, got {limit}")
+    if start == goal:
+        return [Plan([start], [])]
+    if start.cross >= goal.cross:
+        return []
+    diagram(goal)  # a goal no rope can have is an input error, not "unreachable"
+    allowed = sub_states(goal)
+    if start not in allowed:
+        return []
+    # forward: the part of the move graph between start and goal
+    children: dict[PData, list[tuple[PData, Move]]] = {}
+    frontier = [start]
+    while frontier:
+        next_frontier: list[PData] = []
+        for u in frontier:
+            if u in children or u == goal:
+                continue
+            edges: dict[PData, Move] = {}
+            for s in _successors(u):
+                if s.state in allowed and s.state not in edges:
+                    edges[s.state] = s.move
+            children[u] = list(edges.items())
+            next_frontier.extend(edges)
+        frontier = next_frontier
+    # backward: for each state, the plan lengths it has to the goal (moves add 1 or 2 crossings,
+    # so lengths vary); states in decreasing crossing count form a topological order
+    lengths: dict[PData, frozenset[int]] = {goal: frozenset({0})}
+    for u in sorted(children, key=lambda q: -q.cross):
+        acc: set[int] = set()
+        for v, _ in children[u]:
+            acc.update(n + 1 for n in lengths.get(v, ()))
+        if acc:
+            lengths[u] = frozenset(acc)
+    out: list[Plan] = []
+    for total in sorted(lengths.get(start, ())):
+        for states, moves in _paths(start, total, children, lengths):
+            out.append(Plan(states, moves))
+            if len(out) >= limit:
+                return out
+    return out
+
+
+def _paths(
+    u: PData,
+    remaining: int,
+    children: dict[PData, list[tuple[PData, Move]]],
+    lengths: dict[PData, frozenset[int]],
+) -> Iterator[tuple[list[PData], list[Move]]]:
+    """Paths of exactly ``remaining`` moves from ``u`` to the goal (depth-first, fixed order)."""
+    if remaining == 0:
+        yield [u], []
+        return
+    for v, move in children.get(u, ()):
+        if remaining - 1 in lengths.get(v, ()):
+            for states, moves in _paths(v, remaining - 1, children, lengths):
+                yield [u, *states], [move, *moves]
+
+
+def parse_state(value: str | Sequence[Any] | PData, what: str = "state") -> PData:
+    """Parse P-data and check that a rope can have it; errors name ``what`` was wrong."""
+    try:
+        p = parse_p_data(value)
+        diagram(p)
+    except PDataError as exc:
+        raise PDataError(f"{what}: {exc}") from None
+    return p
