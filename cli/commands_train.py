@@ -1,0 +1,151 @@
+"""`twisted train` and `twisted models`: train the inverse model into the database, list stored models."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from cli.app import EXIT_BAD_INPUT, app, console, db_url, fail
+
+
+def _fmt(value: Any, spec: str = ".3f") -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
+
+
+@app.command("train")
+def train_command(
+    ctx: typer.Context,
+    epochs: int = typer.Option(40, "--epochs", min=1, help="Epochs over the training transitions."),
+    hours: float | None = typer.Option(
+        None, "--hours", min=0.0, help="Stop (and store the model) after this time."
+    ),
+    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the newest unfinished training run."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the split, batch order, augmentation and weights."),
+    batch_size: int = typer.Option(256, "--batch-size", min=1),
+    lr: float = typer.Option(1e-3, "--lr", min=0.0, help="Adam learning rate."),
+    hidden: int = typer.Option(256, "--hidden", min=8, help="Width of the shared trunk."),
+    layers: int = typer.Option(3, "--layers", min=1, help="Layers of the shared trunk."),
+    components: int = typer.Option(4, "--components", min=1, help="Gaussians per continuous head."),
+    val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
+    augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
+    checkpoint_every_s: float = typer.Option(
+        30.0, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
+    ),
+) -> None:
+    """Train the inverse model on the collected transitions; checkpoints go to the database."""
+    import torch
+
+    from twisted.model.data import NoTrainingDataError
+    from twisted.model.network import NetConfig
+    from twisted.model.train import Progress as TrainProgress
+    from twisted.model.train import TrainConfig, train
+    from twisted.store import StoreError, open_store
+
+    if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
+        fail(f"--device must be cpu or cuda, got {device!r}")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        fail("--device cuda: no CUDA device is available to torch here; use --device cpu")
+    config = TrainConfig(
+        epochs=epochs,
+        hours=hours,
+        batch_size=batch_size,
+        lr=lr,
+        seed=seed,
+        val_fraction=val_fraction,
+        augment=augment,
+        checkpoint_every_s=checkpoint_every_s,
+        net=NetConfig(hidden=hidden, layers=layers, components=components),
+    )
+    try:
+        store = open_store(db_url(ctx))
+    except StoreError as exc:
+        fail(str(exc))
+
+    columns = (
+        TextColumn("[bold]epoch {task.fields[epoch]}/{task.total}"),
+        BarColumn(),
+        TextColumn("batch {task.fields[batch]}"),
+        TextColumn("loss {task.fields[loss]}"),
+        TextColumn("val {task.fields[val]}"),
+        TimeElapsedColumn(),
+    )
+    with Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task("train", total=epochs, epoch=0, batch="-", loss="-", val="-")
+        last_val = "-"
+
+        def on_progress(p: TrainProgress) -> None:
+            nonlocal last_val
+            if p.val is not None:
+                nll, acc = p.val.get("val_loss"), p.val.get("val_link_accuracy")
+                last_val = f"nll {_fmt(nll)} link-acc {_fmt(acc, '.2f')}"
+            bar.update(
+                task,
+                total=p.epochs,
+                completed=p.epoch + p.batch_index / max(p.batches_per_epoch, 1),
+                epoch=p.epoch,
+                batch=f"{p.batch_index}/{p.batches_per_epoch}",
+                loss=_fmt(p.loss),
+                val=last_val,
+            )
+
+        try:
+            outcome = train(
+                store, config, resume=resume, device=device, progress=on_progress, log=console.print
+            )
+        except NoTrainingDataError as exc:
+            fail(str(exc), EXIT_BAD_INPUT)
+        except ValueError as exc:
+            fail(str(exc), EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            console.print("interrupted: checkpoint saved; continue with `twisted train --resume`")
+            raise typer.Exit(130) from None
+    m = outcome.metrics
+    if outcome.status != "finished":
+        console.print(
+            f"training run {outcome.training_run_id} stopped; continue with `twisted train --resume`"
+        )
+        return
+    console.print(
+        f"model {outcome.model_id} stored (training run {outcome.training_run_id}, "
+        f"{outcome.n_train} training / {outcome.n_val} validation transitions): "
+        f"val NLL {_fmt(m.get('val_loss'))} "
+        f"(link {_fmt(m.get('val_nll_link'))}, z {_fmt(m.get('val_nll_z'))}, x {_fmt(m.get('val_nll_x'))}, "
+        f"y {_fmt(m.get('val_nll_y'))}), link accuracy {_fmt(m.get('val_link_accuracy'), '.3f')}, "
+        f"top-3 {_fmt(m.get('val_link_top3'), '.3f')}"
+    )
+
+
+@app.command("models")
+def models_command(ctx: typer.Context) -> None:
+    """List the inverse models stored in the database (the planner uses the newest)."""
+    from twisted.model.registry import default_model_path, list_models
+    from twisted.store import StoreError, open_store
+
+    try:
+        store = open_store(db_url(ctx))
+    except StoreError as exc:
+        fail(str(exc))
+    models = list_models(store)
+    if not models:
+        path = default_model_path()
+        shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"
+        console.print(f"no models in the database; planning uses {shipped}")
+        return
+    table = Table("id", "name", "training run", "data size", "val NLL", "link acc", "size", "created")
+    for m in models:
+        table.add_row(
+            str(m.id),
+            m.name,
+            "-" if m.training_run_id is None else str(m.training_run_id),
+            str(m.data_size),
+            _fmt(m.metrics.get("val_loss")),
+            _fmt(m.metrics.get("val_link_accuracy"), ".3f"),
+            f"{m.size_bytes / 1e6:.1f} MB",
+            m.created_at.strftime("%Y-%m-%d %H:%M"),
+        )
+    console.print(table)

@@ -1,0 +1,206 @@
+"""Training from the store: data loading and split, resume from a checkpoint, stored models, CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from sqlalchemy import select
+from typer.testing import CliRunner
+
+from cli.main import app
+from tests.test_model import SMALL, random_rope
+from twisted.model.data import NoTrainingDataError, load_transitions, split_by_start
+from twisted.model.network import InverseModel
+from twisted.model.registry import ModelError, default_model_path, list_models, load_model
+from twisted.model.train import TrainConfig, train
+from twisted.sim import sample_curve
+from twisted.store import Configuration, Transition, open_store
+from twisted.store.queries import add_configuration, start_run
+from twisted.store.training import Checkpoint, TrainingRun
+from twisted.topology import top
+
+
+def fill_store(url: str, n_transitions: int, seed: int = 0) -> dict[str, int]:
+    """A small store of synthetic transitions between random ropes (cross rising by 1 or 2; a few by 7)."""
+    rng = np.random.default_rng(seed)
+    store = open_store(url)
+    by_cross: dict[int, list[int]] = {}
+    counts = {"plus1": 0, "plus2": 0, "too_long": 0, "flat": 0}
+    with store.session(write=True) as session:
+        run = start_run(session, "collect", {"synthetic": True}, seed=seed)
+        for s in range(4 * n_transitions):
+            pts = random_rope(seed * 100_000 + s, bend=0.6)
+            p = top(pts)
+            if p.cross > 4:
+                continue
+            c = add_configuration(session, run_id=run.id, p_data=p, q=np.zeros(93), points=pts)
+            by_cross.setdefault(p.cross, []).append(c.id)
+        made = 0
+        while made < n_transitions:
+            a = int(rng.integers(0, 3))
+            step = 1 if rng.random() < 0.7 else 2
+            if rng.random() < 0.05:
+                step = 0  # transitions that add no crossing are not training data
+            if not by_cross.get(a) or not by_cross.get(a + step):
+                continue
+            src = int(rng.choice(by_cross[a]))
+            dst = int(rng.choice(by_cross[a + step]))
+            curve = sample_curve(rng)
+            cs, cd = session.get(Configuration, src), session.get(Configuration, dst)
+            session.add(
+                Transition(
+                    run_id=run.id,
+                    from_configuration_id=src,
+                    to_configuration_id=dst,
+                    link=curve.link,
+                    z_max_m=curve.z_max_m,
+                    x_m=curve.x_m,
+                    y_m=curve.y_m,
+                    from_state_id=cs.state_id,
+                    to_state_id=cd.state_id,
+                    from_cross=cs.cross,
+                    to_cross=cd.cross,
+                )
+            )
+            counts["flat" if step == 0 else f"plus{step}"] += 1
+            made += step > 0
+    store.close()
+    return counts
+
+
+@pytest.fixture
+def small_store(sqlite_url: str) -> tuple[str, dict[str, int]]:
+    return sqlite_url, fill_store(sqlite_url, 120)
+
+
+FAST = dict(batch_size=16, lr=1e-3, seed=3, val_fraction=0.25, net=SMALL)
+
+
+def test_empty_database_asks_to_collect_first(sqlite_url: str) -> None:
+    store = open_store(sqlite_url)
+    with pytest.raises(NoTrainingDataError, match="collect first"):
+        train(store, TrainConfig(epochs=1, **FAST))
+    result = CliRunner().invoke(app, ["--db", sqlite_url, "train", "--epochs", "1"])
+    assert result.exit_code == 2
+    assert "collect first" in result.output
+
+
+def test_loading_in_chunks_reads_every_adding_transition_once(
+    small_store: tuple[str, dict[str, int]],
+) -> None:
+    url, counts = small_store
+    store = open_store(url)
+    whole = load_transitions(store)
+    chunked = load_transitions(store, chunk_size=7)
+    assert len(whole) == counts["plus1"] + counts["plus2"]  # +1 and +2 steps, never flat ones
+    assert np.array_equal(whole.transition_ids, chunked.transition_ids)
+    assert torch.equal(whole.points, chunked.points) and torch.equal(whole.curves, chunked.curves)
+    assert set(np.unique(whole.to_cross - whole.from_cross)) == {1, 2}
+    # state encodings: 4 variants per state, and the identity variant of each state differs from its mirror
+    assert whole.state_enc.shape[1] == 4
+    limited = load_transitions(store, max_id=int(whole.transition_ids[9]))
+    assert len(limited) == 10
+
+
+def test_split_never_puts_a_start_configuration_on_both_sides() -> None:
+    starts = np.random.default_rng(0).integers(0, 300, 2000)
+    train_idx, val_idx = split_by_start(starts, 0.2, seed=5)
+    assert not set(starts[train_idx]) & set(starts[val_idx])
+    assert len(train_idx) + len(val_idx) == len(starts)
+    assert 0.1 < len(val_idx) / len(starts) < 0.3
+    again = split_by_start(starts, 0.2, seed=5)
+    assert np.array_equal(again[1], val_idx)
+    assert not np.array_equal(split_by_start(starts, 0.2, seed=6)[1], val_idx)
+
+
+def test_interrupted_training_resumes_with_the_same_batches_and_weights(tmp_path) -> None:
+    config = TrainConfig(epochs=3, **FAST)
+    runs = {}
+    for name in ("straight", "interrupted"):
+        url = f"sqlite:///{tmp_path / name}.db"
+        fill_store(url, 120, seed=1)
+        runs[name] = url
+    seen_straight: list[list[int]] = []
+    store = open_store(runs["straight"])
+    done = train(store, config, on_batch=lambda idx: seen_straight.append(idx.tolist()))
+    assert done.status == "finished" and done.model_id is not None
+    per_epoch = len(seen_straight) // 3
+    assert per_epoch >= 3
+
+    # stop in the middle of epoch 1, then resume
+    seen: list[list[int]] = []
+    store2 = open_store(runs["interrupted"])
+    stop_after = per_epoch + 2
+    first = train(
+        store2,
+        config,
+        on_batch=lambda idx: seen.append(idx.tolist()),
+        should_stop=lambda: len(seen) >= stop_after,
+    )
+    assert first.status == "interrupted" and first.model_id is None
+    with store2.session() as session:
+        run = session.get(TrainingRun, first.training_run_id)
+        assert run.status == "interrupted"
+        ckpt = session.scalars(select(Checkpoint).order_by(Checkpoint.id.desc())).first()
+        assert (ckpt.epoch, ckpt.batch_index) == (1, 2)
+    second = train(store2, resume=True, on_batch=lambda idx: seen.append(idx.tolist()))
+    assert second.status == "finished" and second.training_run_id == first.training_run_id
+    assert seen == seen_straight
+    a = load_model(open_store(runs["straight"])).net.state_dict()
+    b = load_model(store2).net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert second.metrics["val_loss"] == pytest.approx(done.metrics["val_loss"], rel=1e-6)
+    with pytest.raises(ValueError, match="no unfinished training run"):
+        train(store2, resume=True)
+
+
+def test_finished_model_is_stored_listed_and_loaded_newest_first(
+    small_store: tuple[str, dict[str, int]],
+) -> None:
+    url, _ = small_store
+    store = open_store(url)
+    first = train(store, TrainConfig(epochs=1, **FAST))
+    second = train(store, TrainConfig(epochs=2, **FAST))
+    models = list_models(store)
+    assert [m.id for m in models] == [second.model_id, first.model_id]
+    info = models[0]
+    assert info.training_run_id == second.training_run_id and info.data_size == second.n_train > 0
+    assert {"val_loss", "val_nll_link", "val_link_accuracy"} <= set(info.metrics)
+    assert 0 <= info.metrics["val_link_accuracy"] <= 1
+    newest = load_model(store)
+    assert newest.model_id == second.model_id and newest.metadata["data_size"] == second.n_train
+    assert load_model(store, first.model_id).model_id == first.model_id
+    with pytest.raises(ModelError, match="no model 999"):
+        load_model(store, 999)
+    curves = newest.sample(random_rope(1), None, top(random_rope(2, bend=0.9)), 6, np.random.default_rng(0))
+    assert len(curves) == 6
+
+
+def test_an_empty_model_table_falls_back_to_the_shipped_default(sqlite_url: str) -> None:
+    store = open_store(sqlite_url)
+    path = default_model_path()
+    if not path.is_file():
+        with pytest.raises(ModelError, match="train one with `twisted train`"):
+            load_model(store)
+        return
+    model = load_model(store)
+    assert model.model_id is None
+    assert model.metadata == InverseModel.from_bytes(path.read_bytes()).metadata
+    assert model.metadata["data_size"] > 0
+    assert path.stat().st_size <= 10 * 1024 * 1024
+
+
+def test_cli_train_then_models(small_store: tuple[str, dict[str, int]]) -> None:
+    url, _ = small_store
+    runner = CliRunner()
+    result = runner.invoke(
+        app, ["--db", url, "train", "--epochs", "1", "--batch-size", "32", "--hidden", "32", "--seed", "4"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "val" in result.output
+    result = runner.invoke(app, ["--db", url, "models"])
+    assert result.exit_code == 0, result.output
+    assert "run-1" in result.output
+    result = runner.invoke(app, ["--db", url, "train", "--resume"])
+    assert result.exit_code == 2 and "no unfinished training run" in result.output

@@ -1,0 +1,1 @@
+"""The learned inverse model: encoding, augmentations, network, training and the model registry."""

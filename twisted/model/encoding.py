@@ -1,0 +1,174 @@
+"""What the inverse model sees and predicts, in ONE place used by training and inference.
+
+* :func:`encode_p_data` turns a P-data state into a fixed-size vector (up to
+  :data:`MAX_CROSSINGS` crossings; a longer state is an :class:`EncodingError`, never truncated).
+* :func:`preprocess` turns link points (B, 22, 3) into the network's geometric input. It moves the
+  rope into a *canonical frame*: centred on the mean of its points in the table plane and rotated
+  about z so that the head->tail vector points along +x. Physics is invariant under translations
+  and rotations about the vertical, so the model never has to learn them; the price is that the
+  action's planar displacement must be expressed in the same frame (:func:`curve_to_target`) and
+  rotated back at inference (:func:`target_to_curve`).
+* The crossing features are computed from the points themselves (which segment crosses which,
+  over or under, with which sign), so they stay consistent with any augmentation of the points.
+
+Targets live in a normalised space: ``z`` in [-1, 1] over [0, z_max high], and the canonical
+displacement divided by the range half-width (0.5 m), so it lies in the disc of radius sqrt(2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, N_POINTS
+from twisted.topology import PData
+
+__all__ = [
+    "CROSSING_DIM",
+    "EncodingError",
+    "GEOMETRY_DIM",
+    "MAX_CROSSINGS",
+    "MAX_VISITS",
+    "P_DATA_DIM",
+    "Preprocessed",
+    "curve_to_target",
+    "curve_valid",
+    "encode_p_data",
+    "preprocess",
+    "target_to_curve",
+]
+
+MAX_CROSSINGS = 6
+MAX_VISITS = 2 * MAX_CROSSINGS
+# per visit: present, over(+1)/under(-1), sign +-1, partner one-hot, (partner - position) / MAX_VISITS
+VISIT_DIM = 4 + MAX_VISITS
+P_DATA_DIM = MAX_VISITS * VISIT_DIM + MAX_CROSSINGS + 1  # + one-hot of Cross(s) in 0..MAX_CROSSINGS
+
+N_SEGMENTS = N_LINKS
+_PAIR_I, _PAIR_J = np.triu_indices(N_SEGMENTS, k=2)  # non-adjacent segment pairs, as in Top
+N_PAIRS = len(_PAIR_I)
+CROSSING_DIM = 2 * N_PAIRS  # per pair: crossed * (+1 if the earlier segment is over else -1), crossed * sign
+GEOMETRY_DIM = 3 * N_POINTS + CROSSING_DIM
+
+XY_SCALE_M = 0.5 * N_LINKS * 0.04  # half the rope length: canonical points lie in about [-1, 1]
+Z_REST_M = 0.01  # a link lying on the table (its radius)
+Z_SCALE_M = 0.01  # one radius: a strand lying on another sits about one unit up
+
+Z_LOW, Z_HIGH = float(CURVE_LOW[1]), float(CURVE_HIGH[1])
+XY_HALF_M = float(CURVE_HIGH[2])  # displacement range is [-XY_HALF_M, XY_HALF_M] on x and y
+assert np.allclose(-CURVE_LOW[2:], CURVE_HIGH[2:]), "displacement range must be symmetric"
+
+
+class EncodingError(ValueError):
+    """An input the model cannot encode (for example P-data with too many crossings)."""
+
+
+def encode_p_data(p: PData) -> npt.NDArray[np.float32]:
+    """Fixed-size float32 vector of a P-data state with at most :data:`MAX_CROSSINGS` crossings."""
+    if p.cross > MAX_CROSSINGS:
+        raise EncodingError(
+            f"P-data {p.to_json()} has {p.cross} crossings; the inverse model encodes at most {MAX_CROSSINGS}"
+        )
+    out = np.zeros(P_DATA_DIM, dtype=np.float32)
+    for v in p.visits:
+        base = (v.position - 1) * VISIT_DIM
+        out[base] = 1.0
+        out[base + 1] = 1.0 if v.over == "O" else -1.0
+        out[base + 2] = 1.0 if v.sign == "+" else -1.0
+        out[base + 3] = (v.partner - v.position) / MAX_VISITS
+        out[base + 4 + v.partner - 1] = 1.0
+    out[MAX_VISITS * VISIT_DIM + p.cross] = 1.0
+    return out
+
+
+@dataclass
+class Preprocessed:
+    """The geometric input of a batch in the canonical frame (see the module docstring)."""
+
+    features: torch.Tensor  # (B, GEOMETRY_DIM)
+    link_centres: torch.Tensor  # (B, N_LINKS, 3) normalised canonical centre of each link
+    centre: torch.Tensor  # (B, 2) world xy of the canonical origin (m)
+    cos: torch.Tensor  # (B,) rotation world -> canonical is by -angle
+    sin: torch.Tensor  # (B,)
+
+
+def _cross2(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def crossing_features(points: torch.Tensor) -> torch.Tensor:
+    """Per non-adjacent segment pair: who is over, and the sign, where the projections cross.
+
+    Same test as :func:`twisted.topology.top` (half-open segment parameters), batched in torch;
+    invariant to rotations/translations, so it can run on canonical points.
+    """
+    start = points[:, :-1]
+    d = points[:, 1:] - points[:, :-1]
+    i = torch.as_tensor(_PAIR_I, device=points.device)
+    j = torch.as_tensor(_PAIR_J, device=points.device)
+    di, dj = d[:, i, :2], d[:, j, :2]
+    w = start[:, j, :2] - start[:, i, :2]
+    denom = _cross2(di, dj)
+    ok = denom.abs() > 1e-12
+    safe = torch.where(ok, denom, torch.ones_like(denom))
+    t = _cross2(w, dj) / safe
+    u = _cross2(w, di) / safe
+    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    zi = start[:, i, 2] + t * d[:, i, 2]
+    zj = start[:, j, 2] + u * d[:, j, 2]
+    i_over = zi >= zj
+    d_over = torch.where(i_over[..., None], di, dj)
+    d_under = torch.where(i_over[..., None], dj, di)
+    sign = torch.where(_cross2(d_over, d_under) > 0, 1.0, -1.0)
+    hit_f = hit.to(points.dtype)
+    over_f = torch.where(i_over, 1.0, -1.0).to(points.dtype)
+    return torch.cat([hit_f * over_f, hit_f * sign.to(points.dtype)], dim=1)
+
+
+def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
+    """Canonical-frame geometric features of link points, shape (B, 22, 3) or (22, 3) (metres)."""
+    pts = torch.as_tensor(points, dtype=torch.float32)
+    if pts.ndim == 2:
+        pts = pts[None]
+    if pts.ndim != 3 or pts.shape[1:] != (N_POINTS, 3):
+        raise EncodingError(f"link points must have shape (B, {N_POINTS}, 3), got {tuple(pts.shape)}")
+    centre = pts[:, :, :2].mean(dim=1)
+    axis = pts[:, -1, :2] - pts[:, 0, :2]
+    angle = torch.atan2(axis[:, 1], axis[:, 0])  # atan2(0, 0) = 0: a closed rope keeps the world frame
+    cos, sin = torch.cos(angle), torch.sin(angle)
+    xy = rotate(pts[:, :, :2] - centre[:, None], cos[:, None], -sin[:, None])
+    canon = torch.cat([xy / XY_SCALE_M, (pts[:, :, 2:] - Z_REST_M) / Z_SCALE_M], dim=2)
+    features = torch.cat([canon.flatten(1), crossing_features(canon)], dim=1)
+    link_centres = 0.5 * (canon[:, 1:] + canon[:, :-1])
+    return Preprocessed(features=features, link_centres=link_centres, centre=centre, cos=cos, sin=sin)
+
+
+def rotate(xy: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
+    """Rotate planar vectors (..., 2) by the angle whose cosine/sine are given (broadcast)."""
+    x, y = xy[..., 0], xy[..., 1]
+    return torch.stack([cos * x - sin * y, sin * x + cos * y], dim=-1)
+
+
+def curve_to_target(curve: torch.Tensor, pre: Preprocessed) -> tuple[torch.Tensor, torch.Tensor]:
+    """World curves (B, 4) = (link, z_max_m, x_m, y_m) -> (link (B,) long, target (B, 3) normalised)."""
+    link = curve[:, 0].round().long()
+    z = 2.0 * (curve[:, 1] - Z_LOW) / (Z_HIGH - Z_LOW) - 1.0
+    xy = rotate(curve[:, 2:4], pre.cos, -pre.sin) / XY_HALF_M
+    return link, torch.cat([z[:, None], xy], dim=1)
+
+
+def target_to_curve(link: torch.Tensor, target: torch.Tensor, pre: Preprocessed) -> torch.Tensor:
+    """Inverse of :func:`curve_to_target`: world curves (B, 4) as float tensor."""
+    z = Z_LOW + 0.5 * (target[:, 0] + 1.0) * (Z_HIGH - Z_LOW)
+    xy = rotate(target[:, 1:3] * XY_HALF_M, pre.cos, pre.sin)
+    return torch.cat([link.to(target.dtype)[:, None], z[:, None], xy], dim=1)
+
+
+def curve_valid(curve: torch.Tensor) -> torch.Tensor:
+    """(B,) bool: the world curve lies inside CURVE_LOW..CURVE_HIGH (link checked by the caller)."""
+    low = torch.as_tensor(CURVE_LOW[1:], dtype=curve.dtype, device=curve.device)
+    high = torch.as_tensor(CURVE_HIGH[1:], dtype=curve.dtype, device=curve.device)
+    return ((curve[:, 1:] >= low) & (curve[:, 1:] <= high)).all(dim=1)

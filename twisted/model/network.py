@@ -1,0 +1,280 @@
+"""The auto-regressive inverse model p(c | q, s') = p(link) p(z | link) p(x | link, z) p(y | link, z, x).
+
+Every factor is conditioned on a context vector computed from the configuration (canonical link
+points and their crossings, :mod:`twisted.model.encoding`), the CURRENT P-data and the NEXT P-data.
+``link`` is categorical over the 21 links; ``z``, ``x`` and ``y`` are each a small Gaussian
+mixture in the normalised target space. The continuous heads also see the one-hot chosen link and
+that link's canonical position, so they can place the gripper relative to the rope.
+
+Training uses teacher forcing with the TRUE previous elements of the curve; sampling is ancestral.
+A Gaussian mixture has mass outside the valid ranges; sampling re-draws the out-of-range elements
+(``z`` outside [0, 0.07] m, or the world displacement outside [-0.5, 0.5] m on x or y once rotated
+back from the canonical frame) up to :data:`MAX_REDRAWS` times and clips what is still outside,
+so every sampled curve is valid. The NLL is that of the untruncated mixture.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import torch
+from torch import nn
+
+from twisted.model.encoding import (
+    GEOMETRY_DIM,
+    P_DATA_DIM,
+    Preprocessed,
+    curve_to_target,
+    curve_valid,
+    encode_p_data,
+    preprocess,
+    target_to_curve,
+)
+from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve
+from twisted.topology import PData, parse_p_data, top
+
+__all__ = ["InverseModel", "InverseNet", "LINK_WEIGHT", "NetConfig"]
+
+LINK_WEIGHT = 10.0  # loss = 10 x NLL(link) + NLL(z) + NLL(x) + NLL(y) (the reference's weighting)
+MAX_REDRAWS = 32
+LOG_STD_MIN, LOG_STD_MAX = -6.0, 1.0
+LINK_DIM = N_LINKS + 3  # one-hot link + its canonical centre
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Architecture of :class:`InverseNet` (stored with every model so it can be rebuilt)."""
+
+    hidden: int = 256
+    layers: int = 3
+    head_hidden: int = 128
+    components: int = 4
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> NetConfig:
+        return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
+
+
+def _mlp(sizes: list[int]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for a, b in zip(sizes[:-2], sizes[1:-1], strict=True):
+        layers += [nn.Linear(a, b), nn.SiLU()]
+    layers.append(nn.Linear(sizes[-2], sizes[-1]))
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class Mixture:
+    """Parameters of a batch of 1-D Gaussian mixtures, each (B, K)."""
+
+    logits: torch.Tensor
+    mean: torch.Tensor
+    log_std: torch.Tensor
+
+    def nll(self, x: torch.Tensor) -> torch.Tensor:
+        """(B,) negative log-likelihood of values x (B,)."""
+        z = (x[:, None] - self.mean) * torch.exp(-self.log_std)
+        log_n = -0.5 * z * z - self.log_std - 0.5 * math.log(2 * math.pi)
+        return -torch.logsumexp(torch.log_softmax(self.logits, dim=1) + log_n, dim=1)
+
+    def sample(self, generator: torch.Generator | None) -> torch.Tensor:
+        k = torch.multinomial(torch.softmax(self.logits, dim=1), 1, generator=generator)[:, 0]
+        rows = torch.arange(len(k))
+        eps = torch.randn(len(k), generator=generator, dtype=self.mean.dtype)
+        return self.mean[rows, k] + torch.exp(self.log_std[rows, k]) * eps
+
+    def rows(self, mask: torch.Tensor) -> Mixture:
+        return Mixture(self.logits[mask], self.mean[mask], self.log_std[mask])
+
+
+class MixtureHead(nn.Module):
+    def __init__(self, in_dim: int, hidden: int, components: int) -> None:
+        super().__init__()
+        self.components = components
+        self.net = _mlp([in_dim, hidden, hidden, 3 * components])
+
+    def forward(self, x: torch.Tensor) -> Mixture:
+        logits, mean, log_std = self.net(x).split(self.components, dim=1)
+        return Mixture(logits, mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX))
+
+
+class InverseNet(nn.Module):
+    """The network; inputs are already encoded (see :func:`InverseNet.context`)."""
+
+    def __init__(self, config: NetConfig = NetConfig()) -> None:
+        super().__init__()
+        self.config = config
+        h = config.hidden
+        self.trunk = nn.Sequential(
+            _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
+        )
+        self.link_head = _mlp([h, config.head_hidden, N_LINKS])
+        self.z_head = MixtureHead(h + LINK_DIM, config.head_hidden, config.components)
+        self.x_head = MixtureHead(h + LINK_DIM + 1, config.head_hidden, config.components)
+        self.y_head = MixtureHead(h + LINK_DIM + 2, config.head_hidden, config.components)
+
+    def context(self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor) -> torch.Tensor:
+        """(B, hidden) context from geometry and the encoded current and next P-data (B, P_DATA_DIM)."""
+        return self.trunk(torch.cat([pre.features, p_now, p_next], dim=1))
+
+    @staticmethod
+    def link_features(pre: Preprocessed, link: torch.Tensor) -> torch.Tensor:
+        one_hot = nn.functional.one_hot(link, N_LINKS).to(pre.features.dtype)
+        centre = pre.link_centres[torch.arange(len(link), device=link.device), link]
+        return torch.cat([one_hot, centre], dim=1)
+
+    def losses(
+        self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor, curve: torch.Tensor
+    ) -> dict[str, torch.Tensor]:
+        """Per-sample NLL terms (B,) with teacher forcing on the TRUE link, z and x of ``curve`` (B, 4)."""
+        link, target = curve_to_target(curve, pre)
+        ctx = self.context(pre, p_now, p_next)
+        lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
+        nll_link = nn.functional.cross_entropy(self.link_head(ctx), link, reduction="none")
+        nll_z = self.z_head(lf).nll(target[:, 0])
+        nll_x = self.x_head(torch.cat([lf, target[:, :1]], dim=1)).nll(target[:, 1])
+        nll_y = self.y_head(torch.cat([lf, target[:, :2]], dim=1)).nll(target[:, 2])
+        loss = LINK_WEIGHT * nll_link + nll_z + nll_x + nll_y
+        return {"loss": loss, "nll_link": nll_link, "nll_z": nll_z, "nll_x": nll_x, "nll_y": nll_y}
+
+    def link_logits(self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor) -> torch.Tensor:
+        return self.link_head(self.context(pre, p_now, p_next))
+
+    @torch.no_grad()
+    def sample(
+        self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor, generator: torch.Generator | None
+    ) -> torch.Tensor:
+        """Ancestral sampling of one valid world curve (B, 4) float64 per row (see the module docstring)."""
+        ctx = self.context(pre, p_now, p_next)
+        link = torch.multinomial(torch.softmax(self.link_head(ctx), dim=1), 1, generator=generator)[:, 0]
+        lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
+        target = torch.zeros(len(link), 3)
+        target[:, 0] = _sample_within_unit(self.z_head(lf), generator)
+        # x then y, redrawing both where the rotated-back displacement leaves the box
+        bad = torch.ones(len(link), dtype=torch.bool)
+        for _ in range(MAX_REDRAWS):
+            rows = bad.nonzero()[:, 0]
+            if len(rows) == 0:
+                break
+            lfz = torch.cat([lf[rows], target[rows, :1]], dim=1)
+            target[rows, 1] = self.x_head(lfz).sample(generator)
+            target[rows, 2] = self.y_head(torch.cat([lfz, target[rows, 1:2]], dim=1)).sample(generator)
+            bad = ~curve_valid(target_to_curve(link, target, pre))
+        # float64 so the clipped bounds are exactly the valid range
+        curve = target_to_curve(link, target.double(), _double(pre))
+        low = torch.as_tensor(CURVE_LOW, dtype=torch.float64)
+        high = torch.as_tensor(CURVE_HIGH, dtype=torch.float64)
+        return torch.maximum(torch.minimum(curve, high), low)
+
+
+def _double(pre: Preprocessed) -> Preprocessed:
+    return Preprocessed(
+        pre.features, pre.link_centres, pre.centre.double(), pre.cos.double(), pre.sin.double()
+    )
+
+
+def _sample_within_unit(mix: Mixture, generator: torch.Generator | None) -> torch.Tensor:
+    """Draws in [-1, 1]: out-of-range draws are redrawn, then clipped."""
+    value = mix.sample(generator)
+    for _ in range(MAX_REDRAWS):
+        bad = value.abs() > 1.0
+        if not bad.any():
+            break
+        value[bad] = mix.rows(bad).sample(generator)
+    return value.clamp(-1.0, 1.0)
+
+
+@dataclass
+class InverseModel:
+    """A trained :class:`InverseNet` with its metadata; what the planner uses.
+
+    ``metadata`` holds the training run, data size, metrics and the command that trained it.
+    """
+
+    net: InverseNet
+    metadata: dict[str, Any] = field(default_factory=dict)
+    model_id: int | None = None
+
+    def __post_init__(self) -> None:
+        self.net.eval()
+        self._p_cache: dict[str, torch.Tensor] = {}
+
+    def _encode(self, p: PData) -> torch.Tensor:
+        enc = self._p_cache.get(p.key)
+        if enc is None:
+            enc = torch.from_numpy(encode_p_data(p))[None]
+            self._p_cache[p.key] = enc
+        return enc
+
+    @torch.no_grad()
+    def sample(
+        self,
+        points: npt.ArrayLike,
+        q: npt.ArrayLike | None,
+        next_p_data: PData | str | list[Any],
+        n: int,
+        rng: np.random.Generator,
+        *,
+        p_data: PData | None = None,
+    ) -> list[Curve]:
+        """``n`` curves meant to take the rope at ``points`` (22, 3) to the state ``next_p_data``.
+
+        ``q`` is accepted for the planner's contract but not read: the settled rope is described
+        by its link points (capsules are symmetric about their axis; velocities are near zero).
+        ``p_data`` is the current state; computed with ``top(points)`` when omitted. Draws come
+        from a torch generator seeded from ``rng``, so a seeded ``rng`` replays the same curves.
+        """
+        del q
+        pts = np.asarray(points, dtype=np.float64)
+        nxt = parse_p_data(next_p_data)
+        now = top(pts) if p_data is None else p_data
+        pre = preprocess(pts)
+        pre_n = Preprocessed(
+            *(
+                t.expand(n, *t.shape[1:])
+                for t in (pre.features, pre.link_centres, pre.centre, pre.cos, pre.sin)
+            )
+        )
+        generator = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
+        curves = self.net.sample(
+            pre_n, self._encode(now).expand(n, -1), self._encode(nxt).expand(n, -1), generator
+        )
+        return [Curve.from_array(c) for c in curves.numpy()]
+
+    @torch.no_grad()
+    def link_probabilities(
+        self, points: npt.ArrayLike, next_p_data: PData, p_data: PData | None = None
+    ) -> np.ndarray:
+        """(21,) probability of each link being the one to grasp."""
+        pts = np.asarray(points, dtype=np.float64)
+        now = top(pts) if p_data is None else p_data
+        logits = self.net.link_logits(preprocess(pts), self._encode(now), self._encode(next_p_data))
+        return torch.softmax(logits, dim=1)[0].numpy()
+
+    def to_bytes(self) -> bytes:
+        """torch.save of the weights, architecture and metadata (what the store's BLOB holds)."""
+        buffer = io.BytesIO()
+        torch.save(
+            {
+                "config": self.net.config.to_dict(),
+                "state_dict": self.net.state_dict(),
+                "metadata": self.metadata,
+            },
+            buffer,
+        )
+        return buffer.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes, model_id: int | None = None) -> InverseModel:
+        blob = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+        net = InverseNet(NetConfig.from_dict(blob["config"]))
+        net.load_state_dict(blob["state_dict"])
+        return cls(net=net, metadata=dict(blob.get("metadata", {})), model_id=model_id)

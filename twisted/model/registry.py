@@ -1,0 +1,122 @@
+"""Models in the database, and the default model shipped with the package.
+
+``load_model(store)`` returns the newest model in the ``models`` table, or the one asked for by
+id; when the database holds none it falls back to ``twisted/data/default_model.pt`` (installed as
+package data), so planning works right after installation.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import select
+
+from twisted.model.network import InverseModel
+from twisted.store.db import Store
+from twisted.store.training import TrainedModel
+
+__all__ = [
+    "DEFAULT_MODEL_FILE",
+    "ModelError",
+    "ModelInfo",
+    "default_model_path",
+    "list_models",
+    "load_default_model",
+    "load_model",
+    "save_model",
+]
+
+DEFAULT_MODEL_FILE = "default_model.pt"
+
+
+class ModelError(LookupError):
+    """No usable model (the message says what to do)."""
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """A row of ``models`` without its weights."""
+
+    id: int
+    name: str
+    training_run_id: int | None
+    data_size: int
+    size_bytes: int
+    metrics: dict[str, Any]
+    created_at: dt.datetime
+
+
+def save_model(store: Store, model: InverseModel, *, name: str, training_run_id: int | None = None) -> int:
+    """Store ``model`` (weights, architecture, metadata) in ``models``; returns its id."""
+    blob = model.to_bytes()
+    with store.session(write=True) as session:
+        row = TrainedModel(
+            training_run_id=training_run_id,
+            name=name,
+            data_size=int(model.metadata.get("data_size", 0)),
+            metrics=dict(model.metadata.get("metrics", {})),
+            config=model.net.config.to_dict(),
+            size_bytes=len(blob),
+            weights=blob,
+        )
+        session.add(row)
+        session.flush()
+        model.model_id = row.id
+        return row.id
+
+
+def list_models(store: Store) -> list[ModelInfo]:
+    """Every stored model, newest first (weights not loaded)."""
+    cols = (
+        TrainedModel.id,
+        TrainedModel.name,
+        TrainedModel.training_run_id,
+        TrainedModel.data_size,
+        TrainedModel.size_bytes,
+        TrainedModel.metrics,
+        TrainedModel.created_at,
+    )
+    with store.session() as session:
+        rows = session.execute(select(*cols).order_by(TrainedModel.id.desc())).all()
+    return [ModelInfo(*row) for row in rows]
+
+
+def default_model_path() -> Path:
+    """Where the shipped default model lives (inside the installed package)."""
+    return Path(str(resources.files("twisted") / "data" / DEFAULT_MODEL_FILE))
+
+
+def load_default_model() -> InverseModel:
+    """The model shipped with the package."""
+    path = default_model_path()
+    if not path.is_file():
+        raise ModelError(
+            f"no trained model: the database holds none and the shipped default {path} is missing; "
+            "train one with `twisted train`"
+        )
+    return InverseModel.from_bytes(path.read_bytes())
+
+
+def load_model(store: Store | None = None, model_id: int | None = None) -> InverseModel:
+    """Model ``model_id`` from the store, else the newest stored one, else the shipped default."""
+    if store is not None:
+        with store.session() as session:
+            if model_id is not None:
+                row = session.get(TrainedModel, model_id)
+                if row is None:
+                    known = session.scalars(select(TrainedModel.id).order_by(TrainedModel.id)).all()
+                    raise ModelError(
+                        f"there is no model {model_id} in the database (models: {list(known) or 'none'}); "
+                        "see `twisted models`"
+                    )
+            else:
+                row = session.scalars(select(TrainedModel).order_by(TrainedModel.id.desc())).first()
+            if row is not None:
+                return InverseModel.from_bytes(row.weights, model_id=row.id)
+    elif model_id is not None:
+        raise ModelError(f"model {model_id} was asked for but no database was given")
+    return load_default_model()

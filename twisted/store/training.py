@@ -1,0 +1,74 @@
+"""Tables of the inverse model's training (Alembic revision 0003): runs, checkpoints, finished models.
+
+* ``training_runs``: one ``twisted train`` invocation (resumed runs continue the same row): its seed,
+  parameters, the data snapshot it reads (transitions with ``id <= max_transition_id``), split sizes,
+  progress and final metrics.
+* ``checkpoints``: everything needed to continue a run exactly (weights, optimiser, epoch, batch
+  index, RNG states) as ``torch.save`` bytes; only the newest few per run are kept.
+* ``models``: finished models, ``weights`` = ``torch.save`` bytes of the architecture, weights and
+  metadata (what ``twisted.model.InverseModel.from_bytes`` reads), with data size and metrics.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String, Text
+from sqlalchemy.orm import Mapped, mapped_column
+
+from twisted.store.models import Base, utcnow
+
+TRAINING_STATUSES = ("running", "finished", "interrupted", "failed")
+
+
+class TrainingRun(Base):
+    """One training of the inverse model (``status`` in :data:`TRAINING_STATUSES`)."""
+
+    __tablename__ = "training_runs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    status: Mapped[str] = mapped_column(String(16), default="running", index=True)
+    seed: Mapped[int] = mapped_column(BigInteger)
+    parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # The data snapshot: transitions with id <= max_transition_id (so a resume reads the same data).
+    max_transition_id: Mapped[int] = mapped_column(Integer)
+    n_train: Mapped[int] = mapped_column(Integer, default=0)
+    n_val: Mapped[int] = mapped_column(Integer, default=0)
+    epochs_done: Mapped[int] = mapped_column(Integer, default=0)
+    elapsed_s: Mapped[float] = mapped_column(Float, default=0.0)
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    message: Mapped[str | None] = mapped_column(Text)
+
+
+class Checkpoint(Base):
+    """A resumable snapshot of a training run, taken after ``batch_index`` batches of ``epoch``."""
+
+    __tablename__ = "checkpoints"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    training_run_id: Mapped[int] = mapped_column(ForeignKey("training_runs.id"), index=True)
+    epoch: Mapped[int] = mapped_column(Integer)
+    batch_index: Mapped[int] = mapped_column(Integer)
+    elapsed_s: Mapped[float] = mapped_column(Float)
+    payload: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class TrainedModel(Base):
+    """A finished inverse model; the planner takes the newest unless told otherwise."""
+
+    __tablename__ = "models"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    training_run_id: Mapped[int | None] = mapped_column(ForeignKey("training_runs.id"), index=True)
+    name: Mapped[str] = mapped_column(String(128))
+    data_size: Mapped[int] = mapped_column(Integer)  # training transitions (before augmentation)
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    config: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # architecture
+    size_bytes: Mapped[int] = mapped_column(Integer)
+    weights: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
