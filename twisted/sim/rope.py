@@ -284,8 +284,9 @@ class RopeSim:
 
         for k, target in enumerate(path):
             d.mocap_pos[self._gripper] = target
-            mujoco.mj_step(m, d)
             steps += 1
+            if (reason := self._step()) is not None:
+                return CurveOutcome(False, reason, steps)
             if steps % window == 0 and (reason := self.invalid_reason()) is not None:
                 return CurveOutcome(False, reason, steps)
             if k >= landing_from and self._lands_on_strand(grasped_geom, link):
@@ -298,8 +299,9 @@ class RopeSim:
         max_move = SETTLE_SPEED_M_S * window * m.opt.timestep
         for _ in range(0, self._settle_cap_steps, window):
             for _ in range(window):
-                mujoco.mj_step(m, d)
-            steps += window
+                steps += 1
+                if (reason := self._step()) is not None:
+                    return CurveOutcome(False, reason, steps)
             if (reason := self.invalid_reason()) is not None:
                 return CurveOutcome(False, reason, steps)
             now = self.link_positions()
@@ -316,17 +318,29 @@ class RopeSim:
         reason = self.invalid_reason()
         return CurveOutcome(reason is None, reason, steps)
 
+    def _step(self) -> str | None:
+        """One time step; the reason to stop when two geoms sink deeper than a radius into each other.
+
+        Checked at every step because a strand moving at the gripper's speed could pass through
+        another one between two window checks, changing the topology unphysically.
+        """
+        d = self.data
+        mujoco.mj_step(self.model, d)
+        if d.ncon and (depth := -float(d.contact.dist[: d.ncon].min())) > MAX_PENETRATION_M:
+            return f"deep penetration ({depth:.4f} m > {MAX_PENETRATION_M} m)"
+        return None
+
     def _lands_on_strand(self, grasped_geom: int, link: int) -> bool:
         """True when the grasped link rests on (not beside) a link that is not its neighbour."""
         d = self.data
         if d.ncon == 0:
             return False
         geom = d.contact.geom[: d.ncon]
-        mine = (geom[:, 0] == grasped_geom) | (geom[:, 1] == grasped_geom)
-        if not mine.any():
+        rows = np.flatnonzero((geom[:, 0] == grasped_geom) | (geom[:, 1] == grasped_geom))
+        if rows.size == 0:
             return False
-        other = np.where(geom[mine, 0] == grasped_geom, geom[mine, 1], geom[mine, 0])
-        other_link = self._geom_link[other]
+        pair = geom[rows]
+        other_link = self._geom_link[np.where(pair[:, 0] == grasped_geom, pair[:, 1], pair[:, 0])]
         strand = (other_link >= 0) & (np.abs(other_link - link) >= 2)
-        vertical = np.abs(d.contact.frame[: d.ncon][mine][:, 2]) > 0.7  # normal mostly along z
+        vertical = np.abs(d.contact.frame[rows, 2]) > 0.7  # contact normal mostly along z: on top
         return bool(np.any(strand & vertical))

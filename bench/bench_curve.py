@@ -1,0 +1,83 @@
+"""Wall time of one curve action on one core, from random reached configurations.
+
+    python bench/bench_curve.py --curves 200 [--timestep-s 0.005] [--seed 0]
+
+First a short random walk (not timed) collects reached configurations; then each timed curve
+starts from one of them, drawn at random. Prints the median and p90 wall time per action, the mean
+number of steps, the cost per step and the rejections by reason. The CPU may be shared with other
+processes: compare figures from the same machine and load only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import time
+
+import numpy as np
+
+from twisted.sim import RopeSim, sample_curve
+from twisted.sim.rope import DEFAULT_TIMESTEP_S
+
+
+def reached_configurations(sim: RopeSim, rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` configurations reached by random curves from the straight rope (and from each other)."""
+    sim.reset()
+    reached = [sim.state()]
+    while len(reached) < n:
+        sim.set_state(reached[int(rng.integers(len(reached)))])
+        if sim.apply(sample_curve(rng)).ok:
+            reached.append(sim.state())
+    return reached
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--curves", type=int, default=200, help="timed curve actions")
+    parser.add_argument("--starts", type=int, default=50, help="reached configurations to start from")
+    parser.add_argument("--timestep-s", type=float, default=DEFAULT_TIMESTEP_S)
+    parser.add_argument("--friction-scale", type=float, default=1.0)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    rng = np.random.default_rng(args.seed)
+    sim = RopeSim(args.friction_scale, args.timestep_s)
+    starts = reached_configurations(sim, rng, args.starts)
+    wall, cpu, steps = [], [], []
+    rejected: collections.Counter[str] = collections.Counter()
+    for _ in range(args.curves):
+        sim.set_state(starts[int(rng.integers(len(starts)))])
+        curve = sample_curve(rng)
+        w0, c0 = time.perf_counter(), time.thread_time()
+        outcome = sim.apply(curve)
+        cpu.append(time.thread_time() - c0)
+        wall.append(time.perf_counter() - w0)
+        steps.append(outcome.steps)
+        if not outcome.ok:
+            rejected[(outcome.reason or "?").split(" (")[0]] += 1
+    w, c = np.array(wall), np.array(cpu)
+    print(
+        f"curve action, dt = {args.timestep_s * 1000:g} ms, {args.curves} curves from {args.starts} "
+        f"reached configurations, seed {args.seed}, load average {os.getloadavg()[0]:.2f} "
+        f"on {os.cpu_count()} cores"
+    )
+    for name, t in (("wall", w), ("cpu ", c)):
+        print(
+            f"  {name} per action: median {np.median(t):.4f} s, p90 {np.quantile(t, 0.9):.4f} s, "
+            f"mean {t.mean():.4f} s (reference 0.8 s, target <= 0.1 s)"
+        )
+    print(
+        f"  steps per action: mean {np.mean(steps):.0f}, median {np.median(steps):.0f}; "
+        f"{c.sum() / max(1, sum(steps)) * 1e6:.1f} us cpu per step"
+    )
+    print(
+        f"  rejected: {sum(rejected.values())} of {args.curves}"
+        + "".join(f"\n    {n:4d}  {reason}" for reason, n in rejected.most_common())
+    )
+
+
+if __name__ == "__main__":
+    main()
