@@ -56,11 +56,13 @@ from twisted.topology import EMPTY, PData, PDataError, Visit, parse_p_data
 
 __all__ = [
     "DEFAULT_PLAN_LIMIT",
+    "MOVES_VERSION",
     "Move",
     "Plan",
     "Successor",
     "enumerate_states",
     "explains",
+    "parse_state",
     "plans",
     "successors",
     "sub_states",
@@ -69,6 +71,8 @@ __all__ = [
 MoveKind = Literal["R1", "R2", "Cross"]
 
 DEFAULT_PLAN_LIMIT = 100
+# Bumped whenever the move set changes, so that plans cached in a database are recomputed.
+MOVES_VERSION = 1
 
 
 @dataclass(frozen=True, slots=True)

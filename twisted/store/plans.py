@@ -1,0 +1,186 @@
+"""The plan cache (Alembic revision 0002): BFS plans kept in the database, keyed by (start, goal).
+
+- ``plan_queries``: one row per (start P-data key, goal P-data key) answered: the plan limit it was
+  computed with, how many plans it found, whether that is all of them (``complete``: fewer than the
+  limit exist, so an empty answer means "unreachable"), the version of the moves that produced it
+  and the BFS time.
+- ``plans``: the plans of a query, ``plan_index`` 0, 1, ... shortest first, each with its state
+  sequence (P-data lists) and moves (dicts of :meth:`twisted.moves.Move.to_dict`) as JSON.
+
+``cached_plans(store, start, goal, limit)`` answers from these tables when it can and otherwise runs
+the BFS (:func:`twisted.moves.plans`) and stores the answer, so plans are shared by every run and
+command using the same database. Example, from a sqlite3 shell::
+
+    SELECT q.start_key, q.goal_key, q.n_plans, p.length, p.moves
+    FROM plan_queries q JOIN plans p ON p.query_id = q.id WHERE p.plan_index = 0;
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import time
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    Text,
+    UniqueConstraint,
+    delete,
+    select,
+)
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Mapped, Session, mapped_column
+
+from twisted.moves import MOVES_VERSION, Move, Plan, plans
+from twisted.store.db import Store
+from twisted.store.models import Base, utcnow
+from twisted.topology import PData, parse_p_data
+
+__all__ = ["PlanQuery", "PlanRow", "cached_plans", "get_plans", "put_plans"]
+
+
+class PlanQuery(Base):
+    """One answered (start, goal) plan question."""
+
+    __tablename__ = "plan_queries"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    start_key: Mapped[str] = mapped_column(Text)
+    goal_key: Mapped[str] = mapped_column(Text, index=True)
+    start_cross: Mapped[int] = mapped_column(Integer)
+    goal_cross: Mapped[int] = mapped_column(Integer)
+    plan_limit: Mapped[int] = mapped_column(Integer)
+    n_plans: Mapped[int] = mapped_column(Integer)
+    complete: Mapped[bool] = mapped_column(Boolean)  # n_plans < plan_limit: these are all the plans
+    moves_version: Mapped[int] = mapped_column(Integer)
+    compute_s: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    __table_args__ = (UniqueConstraint("start_key", "goal_key", name="uq_plan_queries_key"),)
+
+
+class PlanRow(Base):
+    """One cached plan: the ``plan_index``-th shortest plan from start to goal."""
+
+    __tablename__ = "plans"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    query_id: Mapped[int] = mapped_column(ForeignKey("plan_queries.id", ondelete="CASCADE"), index=True)
+    start_key: Mapped[str] = mapped_column(Text)
+    goal_key: Mapped[str] = mapped_column(Text)
+    plan_index: Mapped[int] = mapped_column(Integer)
+    length: Mapped[int] = mapped_column(Integer)
+    states: Mapped[list[Any]] = mapped_column(JSON)
+    moves: Mapped[list[Any]] = mapped_column(JSON)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    __table_args__ = (UniqueConstraint("start_key", "goal_key", "plan_index", name="uq_plans_key"),)
+
+    def to_plan(self) -> Plan:
+        return Plan([parse_p_data(s) for s in self.states], [Move.from_dict(m) for m in self.moves])
+
+
+def get_plans(session: Session, start: PData, goal: PData, limit: int) -> list[Plan] | None:
+    """The cached answer to ``plans(start, goal, limit)``, or None when the cache cannot give it.
+
+    A query stored with a limit of at least ``limit``, or one stored complete, answers any limit:
+    the BFS order is deterministic, so the first ``limit`` plans of a larger answer are the answer.
+    """
+    query = session.scalars(
+        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal.key)
+    ).one_or_none()
+    if query is None or query.moves_version != MOVES_VERSION:
+        return None
+    if not query.complete and query.plan_limit < limit:
+        return None
+    rows = session.scalars(
+        select(PlanRow)
+        .where(PlanRow.query_id == query.id, PlanRow.plan_index < limit)
+        .order_by(PlanRow.plan_index)
+    ).all()
+    return [row.to_plan() for row in rows]
+
+
+def put_plans(
+    session: Session, start: PData, goal: PData, limit: int, found: list[Plan], compute_s: float = 0.0
+) -> None:
+    """Store the answer ``found = plans(start, goal, limit)``, replacing any older one (flushes)."""
+    old = session.scalars(
+        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal.key)
+    ).one_or_none()
+    if old is not None:
+        session.execute(delete(PlanRow).where(PlanRow.query_id == old.id))
+        session.delete(old)
+        session.flush()
+    query = PlanQuery(
+        start_key=start.key,
+        goal_key=goal.key,
+        start_cross=start.cross,
+        goal_cross=goal.cross,
+        plan_limit=limit,
+        n_plans=len(found),
+        complete=len(found) < limit,
+        moves_version=MOVES_VERSION,
+        compute_s=compute_s,
+    )
+    session.add(query)
+    session.flush()
+    session.add_all(
+        PlanRow(
+            query_id=query.id,
+            start_key=start.key,
+            goal_key=goal.key,
+            plan_index=i,
+            length=plan.length,
+            states=[s.to_list() for s in plan.states],
+            moves=[m.to_dict() for m in plan.moves],
+        )
+        for i, plan in enumerate(found)
+    )
+    session.flush()
+
+
+def _compute(start: PData, goal: PData, limit: int) -> tuple[list[Plan], float]:
+    t0 = time.perf_counter()
+    found = plans(start, goal, limit)
+    return found, time.perf_counter() - t0
+
+
+def cached_plans(store_or_session: Store | Session, start: PData, goal: PData, limit: int) -> list[Plan]:
+    """``plans(start, goal, limit)`` through the database cache (shortest first; ``[]`` = unreachable).
+
+    With a :class:`Store` the answer is read in one short transaction and, on a miss, computed outside
+    any transaction and written in another (if a concurrent process stored it first, its rows are
+    kept). With a :class:`Session` everything happens in that session and the caller commits.
+    """
+    if limit < 1:
+        raise ValueError(f"limit must be >= 1, got {limit}")
+    if isinstance(store_or_session, Session):
+        session = store_or_session
+        cached = get_plans(session, start, goal, limit)
+        if cached is not None:
+            return cached
+        found, compute_s = _compute(start, goal, limit)
+        put_plans(session, start, goal, limit, found, compute_s)
+        return found
+
+    store = store_or_session
+    with store.session() as session:
+        cached = get_plans(session, start, goal, limit)
+    if cached is not None:
+        return cached
+    found, compute_s = _compute(start, goal, limit)
+    try:
+        with store.session(write=True) as session:
+            if get_plans(session, start, goal, limit) is None:
+                put_plans(session, start, goal, limit, found, compute_s)
+    except IntegrityError:
+        # PostgreSQL: another process inserted the same (start, goal) between our check and insert;
+        # its answer is the same BFS result, so ours is simply not stored.
+        pass
+    return found
