@@ -1,0 +1,204 @@
+"""`twisted collect` (self-supervised data collection into the database) and `twisted stats`."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn
+from rich.table import Table
+
+from cli.app import EXIT_BAD_INPUT, app, console, db_url, fail
+
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130  # the shell's convention for a run stopped by a signal
+
+
+def _hms(seconds: float) -> str:
+    seconds = max(0, int(round(seconds)))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
+def _num(value: Any, spec: str = ",.0f") -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    return format(value, spec)
+
+
+def _pct(value: Any) -> str:
+    return "-" if value is None else f"{100 * value:.1f} %"
+
+
+@app.command("collect")
+def collect_command(
+    ctx: typer.Context,
+    hours: float = typer.Option(..., "--hours", help="How long to collect (hours, > 0; e.g. 0.5)."),
+    workers: int | None = typer.Option(
+        None, "--workers", help="Simulation processes (default: the machine's CPU cores)."
+    ),
+    seed: int | None = typer.Option(
+        None, "--seed", help="Seed of every random choice (default: random, stored)."
+    ),
+    batch_size: int = typer.Option(
+        20, "--batch-size", help="Kept transitions per committed batch (also ~2 s)."
+    ),
+    max_cross: int = typer.Option(6, "--max-cross", help="Keep transitions up to this many crossings."),
+    cross_bias: float = typer.Option(
+        2.0, "--cross-bias", help="D_Q bias: a start crossing count c is picked with weight cross_bias**c."
+    ),
+    max_kept: int | None = typer.Option(
+        None, "--max-kept", help="Also stop after this many kept transitions."
+    ),
+    max_tries: int | None = typer.Option(None, "--max-tries", help="Also stop after this many tried curves."),
+    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (1 = nominal)."),
+) -> None:
+    """Collect transitions that add crossings (D_Q reset scheme) into the database, resumably.
+
+    Running it again continues from the configurations already in the database. Ctrl-C or SIGTERM
+    stops cleanly (the last batch is committed and the run marked interrupted).
+    """
+    from twisted.collect import CollectError, CollectOptions, CollectProgress, collect, default_workers
+    from twisted.store import StoreError, open_store
+
+    options = CollectOptions(
+        hours=hours,
+        workers=default_workers() if workers is None else workers,
+        seed=seed,
+        batch_size=batch_size,
+        max_cross=max_cross,
+        cross_bias=cross_bias,
+        max_kept=max_kept,
+        max_tries=max_tries,
+        friction_scale=friction_scale,
+    )
+    try:
+        options.validate()
+    except CollectError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+    try:
+        store = open_store(db_url(ctx))
+    except StoreError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+
+    columns = (
+        TextColumn("[bold]run {task.fields[run]}"),
+        BarColumn(bar_width=20),
+        TextColumn("{task.fields[elapsed]}/{task.fields[span]}"),
+        TextColumn("kept [bold]{task.fields[kept]}[/]/{task.fields[tried]} tried"),
+        TextColumn("{task.fields[rate]} kept/h"),
+        TextColumn("{task.fields[left]} left"),
+        TextColumn("{task.fields[note]}"),
+    )
+    total_s = options.hours * 3600.0
+    with store, Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task(
+            "collect",
+            total=total_s,
+            run="-",
+            elapsed="0:00:00",
+            span=_hms(total_s),
+            kept=0,
+            tried=0,
+            rate="-",
+            left=_hms(total_s),
+            note="",
+        )
+
+        def show(p: CollectProgress) -> None:
+            bar.update(
+                task,
+                completed=min(p.elapsed_s, p.total_s),
+                run=p.run_id,
+                elapsed=_hms(p.elapsed_s),
+                kept=f"{p.kept:,}",
+                tried=f"{p.tried:,}",
+                rate=_num(p.kept_per_hour) if p.elapsed_s > 5 else "-",
+                left=_hms(p.total_s - p.elapsed_s),
+                note="[yellow]stopping[/]" if p.stopping else "",
+            )
+
+        summary = collect(store, options, on_progress=show)
+
+    console.print(
+        f"run {summary.run_id} {summary.status}: kept {summary.kept:,} of {summary.tried:,} curves "
+        f"({summary.rejected:,} rejected by the simulator) in {_hms(summary.wall_seconds)} with "
+        f"{summary.workers} workers: {summary.kept_per_hour:,.0f} kept/h, "
+        f"{summary.kept_per_hour_per_worker:,.0f} kept/h/worker (seed {summary.seed})"
+    )
+    if summary.kept_by_to_cross:
+        reached = ", ".join(f"{c}: {n:,}" for c, n in summary.kept_by_to_cross.items())
+        console.print(f"new configurations by crossing count: {reached}")
+    if summary.status == "failed":
+        fail(f"collect run {summary.run_id} failed: {summary.message}", EXIT_FAILED)
+    if summary.status == "interrupted":
+        console.print(f"[yellow]{summary.message}[/]; run `twisted collect` again to continue the same D_Q")
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@app.command("stats")
+def stats_command(
+    ctx: typer.Context,
+    as_json: bool = typer.Option(False, "--json", help="Print the figures as JSON."),
+) -> None:
+    """Configurations, kept transitions and states per crossing count; acceptance; throughput per run.
+
+    Read-only: safe to run while a collector is writing.
+    """
+    from twisted.collect import collection_stats
+    from twisted.store import StoreError, open_store
+
+    try:
+        store = open_store(db_url(ctx), create=False)
+    except StoreError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+    with store:
+        stats = collection_stats(store)
+    if as_json:
+        typer.echo(json.dumps(stats, default=str, indent=2))
+        return
+
+    table = Table(title="Per crossing count")
+    for name in ("cross", "states", "configurations", "kept in", "kept out"):
+        table.add_column(name, justify="right")
+    for row in stats["by_cross"]:
+        table.add_row(
+            str(row["cross"]),
+            _num(row["states"]),
+            _num(row["configurations"]),
+            _num(row["transitions_in"]),
+            _num(row["transitions_out"]),
+        )
+    console.print(table)
+
+    table = Table(title="Random curves by start crossing count (collect)")
+    for name in ("from cross", "tried", "kept", "kept rate", "c->c+1", "reference", "rejected"):
+        table.add_column(name, justify="right")
+    for row in stats["acceptance"]:
+        table.add_row(
+            str(row["from_cross"]),
+            _num(row["tried"]),
+            _num(row["kept"]),
+            _pct(row["kept_rate"]),
+            _pct(row["plus_one_rate"]),
+            _pct(row["reference_plus_one_rate"]),
+            _num(row["rejected"]),
+        )
+    console.print(table)
+
+    table = Table(title="Collect runs")
+    for name in ("run", "status", "workers", "hours", "tried", "kept", "kept/h", "kept/h/worker"):
+        table.add_column(name, justify="right")
+    for row in stats["runs"]:
+        table.add_row(
+            str(row["run_id"]),
+            str(row["status"]),
+            str(row["workers"]),
+            _num((row["wall_seconds"] or 0) / 3600, ".3f"),
+            _num(row["tried"]),
+            _num(row["kept"]),
+            _num(row["kept_per_hour"]),
+            _num(row["kept_per_hour_per_worker"]),
+        )
+    console.print(table)
