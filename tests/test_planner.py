@@ -1,0 +1,329 @@
+"""The planner (Algorithm 1): finds and replays a plan, resumes after SIGKILL, rejects bad input.
+
+Simulation is real everywhere (in-process ``SimPool(1)`` or worker processes); seeds are fixed so
+every run here is the same run each time.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sqlalchemy import func, select
+from typer.testing import CliRunner
+
+from cli.main import app
+from twisted.moves import plans
+from twisted.planner import (
+    Node,
+    PlannerOptions,
+    SearchTree,
+    Twisted,
+    check_goal,
+    replay,
+    resume_search,
+    start_search,
+    straight_rope,
+)
+from twisted.sim.pool import SimPool
+from twisted.store import open_store
+from twisted.store.search import SearchCheckpoint, SearchNode, SearchRunRow, load_run
+from twisted.topology import EMPTY, parse_p_data
+
+ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
+# a 3-crossing goal that random curves do not reach in seconds (for the kill / resume cycle)
+THREE_CROSSINGS = '[[1,"O",4,"+"],[2,"U",5,"+"],[3,"O",6,"+"],[4,"U",1,"+"],[5,"O",2,"+"],[6,"U",3,"+"]]'
+
+# seven curls one after the other: a valid rope, but more crossings than the model encodes
+SEVEN_CURLS = json.dumps([[p, "O" if p % 2 else "U", p + 1 if p % 2 else p - 1, "+"] for p in range(1, 15)])
+
+runner = CliRunner()
+
+
+def _db(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'plan.db'}"
+
+
+def _plan(db: str, *args: str) -> tuple[int, str]:
+    result = runner.invoke(app, ["--db", db, "plan", *args])
+    return result.exit_code, result.output
+
+
+# --- the whole loop -----------------------------------------------------------------------------------
+
+
+def test_random_low_finds_a_one_crossing_plan_and_it_replays(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    code, out = _plan(
+        db, "--goal", ONE_CROSSING, "--planner", "random-low", "--workers", "1", "--timeout", "120", "--json"
+    )
+    assert code == 0, out
+    result = json.loads(out)
+    assert result["solved"] and result["outcome"] == "solved"
+    assert result["plan"][-1]["state"] == json.loads(ONE_CROSSING)
+    assert result["sim_calls"] > 0 and result["search_time_s"] > 0
+    # the stored path is the printed one, and replaying it in a fresh simulator ends in the goal
+    with open_store(db) as store:
+        replayed = replay(store, result["run_id"])
+        assert replayed.reached_goal
+        assert all(step.matches for step in replayed.steps)
+        assert [step.curve.link for step in replayed.steps] == [row["link"] for row in result["plan"]]
+    code, out = runner.invoke(app, ["--db", db, "replay", str(result["run_id"])]).exit_code, ""
+    assert code == 0
+
+
+def test_tree_keeps_only_results_that_do_not_lose_crossings_nor_overshoot(tmp_path: Path) -> None:
+    goal = check_goal(ONE_CROSSING)
+    options = PlannerOptions(planner="random-low", seed=3, k=4, p_expand=0.5, k_expand=8)
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        search = start_search(store, goal, options, pool)
+        result = search.run(max_iterations=6)
+        tree = search.tree
+        for node in tree.nodes[1:]:
+            parent = tree.nodes[node.parent]
+            assert parent.p_data.cross <= node.p_data.cross <= goal.cross
+            assert node.sim_call <= result.sim_calls and node.iteration <= result.iterations
+        with store.session() as session:
+            stored = session.scalar(select(func.count()).select_from(SearchNode))
+        assert stored == len(tree) == result.nodes
+
+
+# --- selection heuristics --------------------------------------------------------------------------------
+
+
+def _search_with_states(states: list[str], heuristic: str, goal: str) -> Twisted:
+    """A search whose tree holds one node per state (no simulation is needed to select)."""
+    q, points, p0 = straight_rope()
+    tree = SearchTree()
+    for i, text in enumerate(states):
+        p = parse_p_data(text)
+        tree.add(Node(i, None if i == 0 else 0, q, points, p, None, 0, 0))
+    g = check_goal(goal)
+    options = PlannerOptions(heuristic=heuristic, seed=7)
+    return Twisted(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
+
+
+STATES_0_1_2 = ["[]", ONE_CROSSING, '[[1,"O",4,"+"],[2,"O",3,"+"],[3,"U",2,"+"],[4,"U",1,"+"]]']
+GOAL_3 = '[[1,"O",6,"+"],[2,"O",5,"+"],[3,"O",4,"+"],[4,"U",3,"+"],[5,"U",2,"+"],[6,"U",1,"+"]]'
+
+
+def test_crs_weights_states_by_one_plus_crossings() -> None:
+    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3)
+    assert len(search.candidate_states) == 3, "every state here is on the way to the goal"
+    counts = Counter(search.select_topological_state() for _ in range(6000))
+    shares = np.array([counts[parse_p_data(s).key] for s in STATES_0_1_2]) / 6000
+    assert np.allclose(shares, [1 / 6, 2 / 6, 3 / 6], atol=0.03), shares
+
+
+def test_rnd_is_uniform_over_states() -> None:
+    search = _search_with_states(STATES_0_1_2, "rnd", GOAL_3)
+    counts = Counter(search.select_topological_state() for _ in range(6000))
+    shares = np.array([counts[parse_p_data(s).key] for s in STATES_0_1_2]) / 6000
+    assert np.allclose(shares, [1 / 3] * 3, atol=0.03), shares
+
+
+def test_ucb_prefers_the_state_whose_plans_advance() -> None:
+    search = _search_with_states(STATES_0_1_2, "ucb", GOAL_3)
+    keys = [parse_p_data(s).key for s in STATES_0_1_2]
+    # untried: the prior prefers depth, like crs
+    assert search.select_topological_state() == keys[2]
+    for _ in range(20):
+        search.learn(keys[2], 0, 0.0)  # the deep state never advances
+        search.learn(keys[1], 0, 0.3)
+        search.learn(keys[0], 0, 1.0)  # the root always does
+    assert search.select_topological_state() == keys[0]
+    # a state never tried keeps an exploration bonus that beats a well-known good one
+    search.plans["new"] = search.plans[keys[0]]
+    search.tree.states["new"] = parse_p_data(STATES_0_1_2[1])
+    assert search.select_topological_state() == "new"
+    # each plan of a state is tried once before the bandit exploits
+    tried = {search.select_plan(keys[1])[0] for _ in range(1)}
+    assert tried == {0}
+
+
+def test_states_off_every_plan_are_not_candidates() -> None:
+    # a 1-crossing state of the wrong sign is not a sub-state of this goal: no plan leads on from it
+    wrong = '[[1,"O",2,"-"],[2,"U",1,"-"]]'
+    search = _search_with_states(["[]", wrong], "crs", GOAL_3)
+    assert search.candidate_states == [EMPTY.key]
+
+
+# --- persistence: checkpoint, resume, determinism ----------------------------------------------------------
+
+
+def _tree_signature(store, run_id: int) -> list[tuple]:  # type: ignore[no-untyped-def]
+    info = load_run(store, run_id)
+    assert info is not None
+    return [(n.seq, n.parent_seq, n.p_data.key, n.curve, n.iteration, n.sim_call) for n in info.nodes]
+
+
+def test_stop_and_resume_gives_the_same_tree_as_one_run(tmp_path: Path) -> None:
+    goal = check_goal(THREE_CROSSINGS)
+    options = PlannerOptions(planner="random-low", seed=11, k=3, p_expand=0.3, k_expand=5)
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        whole = start_search(store, goal, options, pool)
+        assert whole.run(max_iterations=8).status == "stopped"
+        first = start_search(store, goal, options, pool)
+        half = first.run(max_iterations=4)
+        assert half.status == "stopped" and half.iterations == 4
+        resumed = resume_search(store, first.run_id, pool)
+        assert resumed.iteration == 4 and resumed.elapsed_before_s == pytest.approx(half.elapsed_s)
+        rest = resumed.run(max_iterations=8)
+        assert rest.run_id == first.run_id and rest.iterations == 8
+        assert rest.sim_calls == whole.sim_calls
+        assert rest.elapsed_s > half.elapsed_s
+        a, b = _tree_signature(store, whole.run_id), _tree_signature(store, first.run_id)
+        assert a == b
+        with store.session() as session:
+            row = session.get(SearchRunRow, first.run_id)
+            assert row is not None and row.outcome == "stopped"
+
+
+def _wait_for_checkpoint(db_path: Path, min_iteration: int, proc: subprocess.Popen, limit_s: float) -> None:
+    import sqlite3
+
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        if db_path.exists():
+            try:
+                with sqlite3.connect(db_path, timeout=5) as conn:
+                    row = conn.execute("SELECT MAX(iteration) FROM search_checkpoints").fetchone()
+                if row and row[0] is not None and row[0] >= min_iteration:
+                    return
+            except sqlite3.OperationalError:
+                pass  # tables not created yet
+        time.sleep(0.2)
+    raise AssertionError(f"no checkpoint at iteration >= {min_iteration} within {limit_s} s")
+
+
+def _twisted(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from cli.main import run; run()", *args]
+
+
+@pytest.mark.slow
+def test_sigkill_then_resume_keeps_run_id_time_and_rows(tmp_path: Path) -> None:
+    db_path = tmp_path / "plan.db"
+    db = f"sqlite:///{db_path}"
+    common = ["--planner", "random-low", "--workers", "2", "--checkpoint-every", "0.3", "--json"]
+    proc = subprocess.Popen(
+        _twisted("--db", db, "plan", "--goal", THREE_CROSSINGS, "--timeout", "120", *common),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        _wait_for_checkpoint(db_path, 3, proc, 90)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    with open_store(db) as store, store.session() as session:
+        (run_id,) = session.scalars(select(SearchRunRow.run_id)).all()
+        checkpoint = session.get(SearchCheckpoint, run_id)
+        assert checkpoint is not None
+        killed_elapsed_s, killed_iteration = checkpoint.elapsed_s, checkpoint.iteration
+        # nodes and checkpoint are written together: nothing beyond the checkpoint survives the kill
+        assert session.scalar(select(func.count()).select_from(SearchNode)) == checkpoint.nodes
+        assert session.scalar(select(func.max(SearchNode.iteration))) <= killed_iteration
+
+    out = subprocess.run(
+        _twisted("--db", db, "plan", "--resume", "--timeout", str(killed_elapsed_s + 3.0), *common),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 3, out.stderr
+    result = json.loads(out.stdout)
+    assert result["run_id"] == run_id and result["outcome"] == "timeout"
+    assert result["search_time_s"] >= killed_elapsed_s + 3.0 - 1e-6
+    assert result["iterations"] > killed_iteration
+    with open_store(db) as store, store.session() as session:
+        assert session.scalar(select(func.count()).select_from(SearchRunRow)) == 1
+        seqs = session.scalars(select(SearchNode.seq).order_by(SearchNode.seq)).all()
+        assert seqs == list(range(len(seqs))), "every node once, in creation order"
+        assert len(seqs) == result["nodes"]
+
+
+@pytest.mark.slow
+def test_sigterm_saves_a_checkpoint_and_exits_143(tmp_path: Path) -> None:
+    db_path = tmp_path / "plan.db"
+    db = f"sqlite:///{db_path}"
+    proc = subprocess.Popen(
+        _twisted("--db", db, "plan", "--goal", THREE_CROSSINGS, "--planner", "random-low", "--workers", "2",
+                 "--timeout", "120", "--checkpoint-every", "30"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        _wait_for_checkpoint(db_path, 0, proc, 60)
+        time.sleep(3.0)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "--resume" in err
+    with open_store(db) as store:
+        run_id = store.session().__enter__().scalar(select(SearchRunRow.run_id))
+        info = load_run(store, run_id)
+        assert info is not None and info.outcome == "interrupted" and info.status == "interrupted"
+        assert info.checkpoint is not None and info.checkpoint.iteration > 0
+        assert info.checkpoint.elapsed_s >= 2.5
+        assert len(info.nodes) == info.checkpoint.nodes
+
+
+# --- bad input ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "goal",
+    [
+        "not json",
+        '[[1,"O",2,"+"]]',  # one visit
+        '[[1,"O",2,"+"],[2,"O",1,"+"]]',  # both over
+        '[[1,"O",2,"+"],[2,"U",1,"-"]]',  # signs differ
+        "[]",  # the straight rope already
+        SEVEN_CURLS,
+    ],
+)
+def test_bad_goals_exit_2(tmp_path: Path, goal: str) -> None:
+    code, out = _plan(_db(tmp_path), "--goal", goal, "--planner", "random-low", "--timeout", "1")
+    assert code == 2, out
+    assert "goal" in out.lower()
+
+
+def test_bad_run_ids_and_missing_model_exit_2(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    assert _plan(db, "--resume", "42", "--timeout", "1")[0] == 2
+    assert _plan(db, "--resume", "--timeout", "1")[0] == 2  # nothing to resume
+    assert _plan(db, "--timeout", "1")[0] == 2  # no goal
+    assert runner.invoke(app, ["--db", db, "replay", "42"]).exit_code == 2
+    code, out = _plan(db, "--goal", ONE_CROSSING, "--model", "999", "--timeout", "1")
+    assert code == 2 and "model" in out.lower()
+    with open_store(db) as store:
+        with store.session() as session:
+            assert session.scalar(select(func.count()).select_from(SearchRunRow)) == 0
+
+
+def test_resume_refuses_changed_search_options(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    code, out = _plan(db, "--goal", THREE_CROSSINGS, "--planner", "random-low", "--workers", "1",
+                      "--max-iterations", "1", "--k", "2", "--p-expand", "0", "--json")
+    assert code == 3, out
+    run_id = json.loads(out)["run_id"]
+    code, out = _plan(db, "--resume", str(run_id), "--heuristic", "ucb", "--timeout", "5")
+    assert code == 2 and "heuristic" in out
+    code, out = _plan(db, "--resume", str(run_id), "--goal", ONE_CROSSING, "--timeout", "5")
+    assert code == 2 and "goal" in out

@@ -1,0 +1,858 @@
+"""TWISTED (Algorithm 1 of the paper) and its baselines.
+
+The search keeps a tree ``T`` of reached configurations (each with its topological state ``Top(q)``)
+and a set of high-level plans ``P`` from every reached state to the goal. Each iteration:
+
+    s = select_topological_state()          # rnd | crs (weight 1 + Cross(s)) | ucb (bandit)
+    plan = select_plan(s)                   # uniform (or ucb) over the plans from s
+    q = select_configuration(s)             # uniform over the nodes of T in state s
+    found = follow_plan(q, plan)            # K curves per step, continue from the first that hits
+    if not found and rng.random() < p:      # completeness: random curves from a random node
+        random_expand()
+
+until the goal state appears in ``T`` or the time runs out. The answer is the path of curves from
+the root of ``T`` to the goal node.
+
+Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
+the same high-level plans with uniformly random curves (the paper's "low+high level");
+``low-level-only`` applies random curves to random nodes of ``T`` with no topological guidance
+beyond the goal test.
+
+Everything random goes through one ``numpy.random.Generator``; simulation results come back in
+the order the curves were sampled (``SimPool`` preserves order), so a run replays from its seed
+for any number of workers. The search is persisted through a :class:`SearchRecorder` at iteration
+boundaries only: a checkpoint (iteration, elapsed time, RNG state, selection statistics) and the
+tree nodes created up to that boundary are written in one transaction, so a resumed run continues
+exactly where the checkpoint left it and never writes a node twice.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from twisted.topology import PData
+
+__all__ = [
+    "HEURISTICS",
+    "MAX_GOAL_CROSS",
+    "PLANNERS",
+    "Checkpoint",
+    "CurveSampler",
+    "Node",
+    "PlanInputError",
+    "PlannerOptions",
+    "RandomCurves",
+    "SearchRecorder",
+    "SearchResult",
+    "SearchTree",
+    "StopRequested",
+    "StopSignals",
+    "Twisted",
+    "ModelCurves",
+    "ReplayResult",
+    "check_goal",
+    "high_level",
+    "replay",
+    "resume_search",
+    "start_search",
+    "straight_rope",
+    "tree_from_rows",
+]
+
+PLANNERS = ("twisted", "random-low", "low-level-only")
+HEURISTICS = ("rnd", "crs", "ucb")
+
+# The inverse model encodes goals of up to 6 crossings (DESIGN section 6: the reference truncated to 3).
+MAX_GOAL_CROSS = 6
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Algorithm options; the defaults are the paper's values."""
+
+    planner: str = "twisted"
+    heuristic: str = "crs"
+    k: int = 6  # curves sampled per plan step (K)
+    p_expand: float = 0.05  # probability of RandomExpand after a failed iteration (p)
+    k_expand: int = 100  # random curves per RandomExpand (k)
+    plan_limit: int = 100  # high-level plans kept per reached state
+    seed: int = 0
+    ucb_c: float = 0.7  # exploration weight of the ucb heuristic (rewards lie in [0, 1])
+
+    def validate(self) -> None:
+        """Raise ValueError naming the option that is out of range."""
+        if self.planner not in PLANNERS:
+            raise ValueError(f"planner must be one of {', '.join(PLANNERS)}, got {self.planner!r}")
+        if self.heuristic not in HEURISTICS:
+            raise ValueError(f"heuristic must be one of {', '.join(HEURISTICS)}, got {self.heuristic!r}")
+        if self.k < 1:
+            raise ValueError(f"k (curves per step) must be at least 1, got {self.k}")
+        if not 0.0 <= self.p_expand <= 1.0:
+            raise ValueError(f"p_expand must lie in [0, 1], got {self.p_expand}")
+        if self.k_expand < 1:
+            raise ValueError(f"k_expand must be at least 1, got {self.k_expand}")
+        if self.plan_limit < 1:
+            raise ValueError(f"plan_limit must be at least 1, got {self.plan_limit}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "planner": self.planner,
+            "heuristic": self.heuristic,
+            "k": self.k,
+            "p_expand": self.p_expand,
+            "k_expand": self.k_expand,
+            "plan_limit": self.plan_limit,
+            "seed": self.seed,
+            "ucb_c": self.ucb_c,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
+        known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
+        return cls(**known)
+
+
+# --- the tree T -------------------------------------------------------------------------------------
+
+
+@dataclass(eq=False, slots=True)
+class Node:
+    """A vertex of ``T``: a reached configuration ``q``, its state ``Top(q)``, the curve that made it."""
+
+    index: int  # creation order in the run (0 = root)
+    parent: int | None
+    q: np.ndarray  # opaque simulator state (RopeSim.state())
+    points: np.ndarray  # (22, 3) link points, head first
+    p_data: PData
+    curve: Any | None  # twisted.sim.Curve; None for the root
+    iteration: int  # iteration that created it (0 = root)
+    sim_call: int  # number of the simulator call that produced it (0 = root)
+    created_s: float = 0.0  # elapsed search time when it was created
+    db_id: int | None = None  # row id once written to the store
+
+
+class SearchTree:
+    """``T``: the nodes in creation order, indexed by topological state."""
+
+    def __init__(self) -> None:
+        self.nodes: list[Node] = []
+        self.by_state: dict[str, list[int]] = {}
+        self.states: dict[str, PData] = {}  # insertion order = order of first reach
+
+    def __len__(self) -> int:
+        return len(self.nodes)
+
+    def add(self, node: Node) -> Node:
+        if node.index != len(self.nodes):
+            raise ValueError(f"node index {node.index} breaks creation order (expected {len(self.nodes)})")
+        self.nodes.append(node)
+        key = node.p_data.key
+        if key not in self.states:
+            self.states[key] = node.p_data
+            self.by_state[key] = []
+        self.by_state[key].append(node.index)
+        return node
+
+    def path(self, index: int) -> list[Node]:
+        """The nodes from the root to node ``index``."""
+        out = []
+        cursor: int | None = index
+        while cursor is not None:
+            node = self.nodes[cursor]
+            out.append(node)
+            cursor = node.parent
+        return out[::-1]
+
+
+# --- what the search composes -------------------------------------------------------------------------
+
+
+class CurveSampler(Protocol):
+    """Proposes curves that should move the rope of ``node`` to ``next_state``."""
+
+    name: str
+
+    def sample(
+        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]:
+        ...
+
+
+class RandomCurves:
+    """Uniformly random curves over the action ranges (the baselines, and RandomExpand)."""
+
+    name = "random"
+
+    def sample(
+        self, node: Node, next_state: PData | None, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]:
+        from twisted.sim import sample_curve
+
+        return [sample_curve(rng) for _ in range(n)]
+
+
+class Pool(Protocol):
+    def run(self, jobs: Sequence[tuple[np.ndarray, Any]]) -> list[Any]:
+        ...
+
+
+@dataclass
+class Checkpoint:
+    """The consistent cut of a search at an iteration boundary."""
+
+    iteration: int
+    elapsed_s: float
+    sim_calls: int
+    rng_state: dict[str, Any]
+    stats: dict[str, Any]
+
+
+class SearchRecorder(Protocol):
+    """Persists nodes and checkpoints (implemented by :class:`twisted.store.search.SearchRun`)."""
+
+    def save(self, nodes: Sequence[Node], checkpoint: Checkpoint) -> None:
+        """Write ``nodes`` (assigning ``db_id``) and ``checkpoint`` in one transaction."""
+
+    def finish(self, status: str, goal_node: Node | None, checkpoint: Checkpoint) -> None:
+        """Mark the run ``solved`` / ``timeout`` / ``interrupted`` / ``stopped``."""
+
+
+@dataclass
+class SearchResult:
+    """What a search returns; ``path`` runs from the root to the goal node (empty when not solved)."""
+
+    run_id: int | None
+    status: str  # solved | timeout | interrupted | stopped (iteration cap)
+    elapsed_s: float
+    sim_calls: int
+    iterations: int
+    nodes: int
+    states: int
+    path: list[Node] = field(default_factory=list)
+
+    @property
+    def solved(self) -> bool:
+        return self.status == "solved"
+
+
+class _Stop(Exception):
+    """Unwinds an unfinished iteration (time out or a stop signal): it is discarded, not half-saved."""
+
+    def __init__(self, status: str) -> None:
+        super().__init__(status)
+        self.status = status
+
+
+class StopRequested(BaseException):
+    """Raised by :class:`StopSignals` inside a blocking wait on the worker pool (never elsewhere)."""
+
+
+class StopSignals:
+    """Turns SIGINT / SIGTERM into a stop request that the search checks between steps.
+
+    The handler only sets a flag, except while the search waits on the worker pool
+    (:meth:`interruptible`): Ctrl-C also kills the workers' current jobs, whose results would then
+    never come, so the wait is cut short by raising :class:`StopRequested`. The unfinished iteration
+    is discarded either way; a store transaction is never interrupted half-way.
+    """
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._waiting = False
+
+    def __call__(self) -> bool:
+        return self.signum is not None
+
+    @property
+    def exit_code(self) -> int:
+        """Shell convention 128 + signal: 130 for Ctrl-C (SIGINT), 143 for SIGTERM."""
+        return 128 + (self.signum or 0)
+
+    @contextlib.contextmanager
+    def interruptible(self) -> Iterator[None]:
+        """A section (a wait on worker processes) that a stop signal may cut short."""
+        self._waiting = True
+        try:
+            if self.signum is not None:
+                raise StopRequested
+            yield
+        finally:
+            self._waiting = False
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        self.signum = signum
+        if self._waiting:
+            self._waiting = False
+            raise StopRequested
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[StopSignals]:
+        """Handle SIGINT and SIGTERM for the duration of the block (main thread only)."""
+        previous = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield self
+        finally:
+            for s, h in previous.items():
+                signal.signal(s, h)
+
+
+# --- Algorithm 1 ----------------------------------------------------------------------------------------
+
+
+class Twisted:
+    """One search for ``goal`` (Algorithm 1), resumable from a :class:`Checkpoint`."""
+
+    def __init__(
+        self,
+        goal: PData,
+        tree: SearchTree,
+        options: PlannerOptions,
+        pool: Pool,
+        high_level: Callable[[PData], list[Any]],
+        sampler: CurveSampler | None = None,
+        recorder: SearchRecorder | None = None,
+        checkpoint: Checkpoint | None = None,
+        run_id: int | None = None,
+        stop: StopSignals | None = None,
+        checkpoint_every_s: float = 2.0,
+        progress: Callable[[Twisted], None] | None = None,
+    ) -> None:
+        options.validate()
+        if len(tree) == 0:
+            raise ValueError("the tree needs its root (the initial configuration)")
+        self.goal = goal
+        self.tree = tree
+        self.options = options
+        self.pool = pool
+        self.high_level = high_level
+        self.random_curves = RandomCurves()
+        self.sampler: CurveSampler = sampler if sampler is not None else self.random_curves
+        self.recorder = recorder
+        self.run_id = run_id
+        self.stop = stop if stop is not None else StopSignals()
+        self.checkpoint_every_s = checkpoint_every_s
+        self.progress = progress
+
+        self.rng = np.random.default_rng(options.seed)
+        self.iteration = 0
+        self.elapsed_before_s = 0.0
+        self.sim_calls = 0
+        # selection statistics: [times selected, summed reward] per state and per (state, plan)
+        self.stats: dict[str, dict[str, list[float]]] = {"state": {}, "plan": {}}
+        if checkpoint is not None:
+            self.rng.bit_generator.state = checkpoint.rng_state
+            self.iteration = checkpoint.iteration
+            self.elapsed_before_s = checkpoint.elapsed_s
+            self.sim_calls = checkpoint.sim_calls
+            self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in ("state", "plan")}
+
+        # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
+        self.plans: dict[str, list[Any]] = {}
+        self.goal_node: Node | None = None
+        for p_data in tree.states.values():
+            self._reached(p_data)
+        if goal.key in tree.by_state:
+            self.goal_node = tree.nodes[tree.by_state[goal.key][0]]
+
+        self._saved = len(tree)  # nodes already in the store
+        self._t0 = time.perf_counter()
+        self._last_save = self._t0
+        self._boundary = self._checkpoint()
+
+    # -- bookkeeping ------------------------------------------------------------------------------------
+
+    @property
+    def elapsed_s(self) -> float:
+        return self.elapsed_before_s + (time.perf_counter() - self._t0)
+
+    def _checkpoint(self) -> Checkpoint:
+        return Checkpoint(
+            iteration=self.iteration,
+            elapsed_s=self.elapsed_s,
+            sim_calls=self.sim_calls,
+            rng_state=self.rng.bit_generator.state,
+            stats={"state": {k: list(v) for k, v in self.stats["state"].items()},
+                   "plan": {k: list(v) for k, v in self.stats["plan"].items()}},
+        )
+
+    def _save(self, upto: int, checkpoint: Checkpoint) -> None:
+        if self.recorder is not None:
+            self.recorder.save(self.tree.nodes[self._saved:upto], checkpoint)
+        self._saved = upto
+        self._last_save = time.perf_counter()
+
+    def _check_stop(self, deadline_s: float | None) -> None:
+        if self.stop():
+            raise _Stop("interrupted")
+        if deadline_s is not None and self.elapsed_s >= deadline_s:
+            raise _Stop("timeout")
+
+    @property
+    def candidate_states(self) -> list[str]:
+        """Reached states with at least one plan to the goal, in order of first reach."""
+        return [key for key, plans in self.plans.items() if plans]
+
+    # -- the main loop ----------------------------------------------------------------------------------
+
+    def run(self, timeout_s: float | None = None, max_iterations: int | None = None) -> SearchResult:
+        """Search until the goal is in ``T``, ``timeout_s`` of total search time, or ``max_iterations``."""
+        self._t0 = time.perf_counter()
+        self._last_save = self._t0
+        self._deadline_s = timeout_s
+        status = "solved" if self.goal_node is not None else ""
+        committed = len(self.tree)
+        while not status:
+            if max_iterations is not None and self.iteration >= max_iterations:
+                status = "stopped"
+                break
+            try:
+                self._check_stop(timeout_s)
+                self.iteration += 1
+                if self.options.planner == "low-level-only":
+                    self.low_level_only_step()
+                else:
+                    self.twisted_iteration()
+            except _Stop as stop:
+                # discard the unfinished iteration: the store keeps the last boundary, so resuming
+                # replays it from the same RNG state and writes its nodes exactly once
+                status = stop.status
+                break
+            committed = len(self.tree)
+            self._boundary = self._checkpoint()
+            if self.goal_node is not None:
+                status = "solved"
+            elif time.perf_counter() - self._last_save >= self.checkpoint_every_s:
+                self._save(committed, self._boundary)
+            if self.progress is not None:
+                self.progress(self)
+        self._boundary.elapsed_s = self.elapsed_s  # the discarded part still counts toward the timeout
+        self._save(committed, self._boundary)
+        if self.recorder is not None:
+            self.recorder.finish(status, self.goal_node, self._boundary)
+        return SearchResult(
+            run_id=self.run_id,
+            status=status,
+            elapsed_s=self._boundary.elapsed_s,
+            sim_calls=self._boundary.sim_calls,
+            iterations=self._boundary.iteration,
+            nodes=committed,
+            states=len({self.tree.nodes[i].p_data.key for i in range(committed)}),
+            path=self.tree.path(self.goal_node.index) if self.goal_node is not None else [],
+        )
+
+    def twisted_iteration(self) -> None:
+        """Lines 5-12 of Algorithm 1."""
+        s = self.select_topological_state()
+        if s is None:
+            # no reached state has a plan to the goal: only random curves can make progress
+            self.random_expand()
+            return
+        plan_index, plan = self.select_plan(s)
+        node = self.select_configuration(s)
+        steps_done = self.follow_plan(node, plan)
+        self.learn(s, plan_index, steps_done / len(plan.moves))
+        if self.goal_node is None and self.rng.random() < self.options.p_expand:
+            self.random_expand()
+
+    # -- SelectTopologicalState / SelectPlan / SelectConfiguration -------------------------------------
+
+    def select_topological_state(self) -> str | None:
+        """A reached state with a plan: rnd uniform, crs weight 1 + Cross(s), ucb upper confidence bound."""
+        candidates = self.candidate_states
+        if not candidates:
+            return None
+        if self.options.heuristic == "rnd":
+            return candidates[int(self.rng.integers(len(candidates)))]
+        if self.options.heuristic == "crs":
+            weights = np.array([1.0 + self.tree.states[key].cross for key in candidates])
+            return candidates[int(self.rng.choice(len(candidates), p=weights / weights.sum()))]
+        return self._ucb_state(candidates)
+
+    def _ucb_state(self, candidates: list[str]) -> str:
+        # Each state starts with one pseudo-observation worth (1 + Cross(s)) / (1 + Cross(goal)), so an
+        # untried state is preferred by depth as in crs instead of forcing a round over every state.
+        stats = self.stats["state"]
+        total = sum(stats.get(key, [0.0, 0.0])[0] for key in candidates)
+        best, best_score = candidates[0], -math.inf
+        for key in candidates:
+            n, reward = stats.get(key, [0.0, 0.0])
+            prior = (1.0 + self.tree.states[key].cross) / (1.0 + self.goal.cross)
+            bonus = self.options.ucb_c * math.sqrt(math.log(1.0 + total) / (n + 1.0))
+            score = (reward + prior) / (n + 1.0) + bonus
+            if score > best_score:
+                best, best_score = key, score
+        return best
+
+    def select_plan(self, s: str) -> tuple[int, Any]:
+        """A high-level plan from ``s``: uniform (rnd, crs) or upper confidence bound (ucb)."""
+        plans = self.plans[s]
+        if self.options.heuristic != "ucb":
+            index = int(self.rng.integers(len(plans)))
+            return index, plans[index]
+        n_state = self.stats["state"].get(s, [0.0, 0.0])[0]
+        best, best_score = 0, -math.inf
+        for index in range(len(plans)):
+            n, reward = self.stats["plan"].get(f"{s}|{index}", [0.0, 0.0])
+            if n == 0:
+                return index, plans[index]  # each plan of a selected state is tried once first
+            score = reward / n + self.options.ucb_c * math.sqrt(math.log(1.0 + n_state) / n)
+            if score > best_score:
+                best, best_score = index, score
+        return best, plans[best]
+
+    def select_configuration(self, s: str) -> Node:
+        """A node of ``T`` in state ``s``, uniformly."""
+        indices = self.tree.by_state[s]
+        return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
+
+    def learn(self, s: str, plan_index: int, reward: float) -> None:
+        """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
+        for table, key in (("state", s), ("plan", f"{s}|{plan_index}")):
+            entry = self.stats[table].setdefault(key, [0.0, 0.0])
+            entry[0] += 1.0
+            entry[1] += reward
+
+    # -- FollowPlan / RandomExpand -------------------------------------------------------------------
+
+    def follow_plan(self, node: Node, plan: Any) -> int:
+        """Follow ``plan`` from ``node``; returns the number of plan steps achieved (goal: all)."""
+        current = node
+        for step, (next_state, move) in enumerate(zip(plan.states[1:], plan.moves, strict=True)):
+            if step:
+                self._check_stop(self._deadline_s)
+            curves = self.sampler.sample(current, next_state, move, self.options.k, self.rng)
+            children = self.simulate(current, curves)
+            if self.goal_node is not None:
+                return len(plan.moves)
+            hit = next((c for c in children if c is not None and c.p_data == next_state), None)
+            if hit is None:
+                return step
+            current = hit
+        return len(plan.moves)
+
+    def random_expand(self) -> None:
+        """k random curves from a uniformly chosen node of ``T`` (the completeness guarantee)."""
+        node = self.tree.nodes[int(self.rng.integers(len(self.tree)))]
+        curves = self.random_curves.sample(node, None, None, self.options.k_expand, self.rng)
+        # simulated in chunks so that a stop signal or the deadline is noticed within a second or two
+        chunk = 24
+        for start in range(0, len(curves), chunk):
+            if start:
+                self._check_stop(self._deadline_s)
+            self.simulate(node, curves[start:start + chunk])
+            if self.goal_node is not None:
+                return
+
+    def low_level_only_step(self) -> None:
+        """Baseline: K random curves from a uniformly chosen node of ``T``; only the goal test guides it."""
+        node = self.tree.nodes[int(self.rng.integers(len(self.tree)))]
+        self.simulate(node, self.random_curves.sample(node, None, None, self.options.k, self.rng))
+
+    # -- simulation and growing T -----------------------------------------------------------------------
+
+    def simulate(self, parent: Node, curves: list[Any]) -> list[Node | None]:
+        """Apply ``curves`` to ``parent`` in the worker pool; add the kept results to ``T`` in curve order."""
+        try:
+            with self.stop.interruptible():
+                results = self.pool.run([(parent.q, curve) for curve in curves])
+        except StopRequested:
+            raise _Stop("interrupted") from None
+        first_call = self.sim_calls + 1
+        self.sim_calls += len(curves)
+        pairs = enumerate(zip(curves, results, strict=True))
+        return [self.add_to_tree(parent, curve, result, first_call + i) for i, (curve, result) in pairs]
+
+    def add_to_tree(self, parent: Node, curve: Any, result: Any, sim_call: int) -> Node | None:
+        """Keep ``result`` when Cross does not drop (the paper's rule) and can still lead to the goal.
+
+        A state with more crossings than the goal is dropped as well: every curve kept after it has
+        at least as many crossings, so nothing below it can be the goal.
+        """
+        if not result.ok:
+            return None
+        p_data: PData = result.p_data
+        if p_data.cross < parent.p_data.cross or p_data.cross > self.goal.cross:
+            return None
+        node = self.tree.add(
+            Node(
+                index=len(self.tree),
+                parent=parent.index,
+                q=result.state,
+                points=result.points,
+                p_data=p_data,
+                curve=curve,
+                iteration=self.iteration,
+                sim_call=sim_call,
+                created_s=self.elapsed_s,
+            )
+        )
+        if p_data.key not in self.plans:
+            self._reached(p_data)
+        if self.goal_node is None and p_data == self.goal:
+            self.goal_node = node
+        return node
+
+    def _reached(self, p_data: PData) -> None:
+        """A state reached for the first time: run the high level from it (through the plan cache)."""
+        if self.options.planner == "low-level-only" or p_data.cross >= self.goal.cross:
+            self.plans[p_data.key] = []
+            return
+        self.plans[p_data.key] = list(self.high_level(p_data))[: self.options.plan_limit]
+
+
+# --- composing a search from the store, the simulator, the high level and the model ----------------------
+
+
+class ModelCurves:
+    """Curves from the learned inverse model, conditioned on the rope's points and the next state."""
+
+    name = "model"
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+
+    def sample(
+        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]:
+        return list(self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data))
+
+
+class PlanInputError(ValueError):
+    """A goal, run id or start configuration the planner cannot take; the message says why."""
+
+
+def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROSS) -> PData:
+    """Parse ``goal``; check that a rope can have it and the model can encode it (else PlanInputError)."""
+    from twisted.moves import parse_state
+    from twisted.topology import PDataError
+
+    try:
+        p_data = parse_state(goal, "goal")
+    except PDataError as exc:
+        raise PlanInputError(str(exc)) from None
+    if p_data.cross > max_cross:
+        raise PlanInputError(
+            f"goal {p_data.key} has {p_data.cross} crossings; the inverse model encodes at most {max_cross}"
+        )
+    if p_data.cross == 0:
+        raise PlanInputError("goal [] (no crossing) is the straight rope itself: give a state with crossings")
+    return p_data
+
+
+def high_level(store: Any, goal: PData, limit: int) -> Callable[[PData], list[Any]]:
+    """``s -> plans(s, goal)``, shortest first, through the store's plan cache."""
+    try:
+        from twisted.store.plans import cached_plans
+    except ImportError:  # TEMPORARY until the plan cache lands: the BFS itself, memoised in memory
+        from twisted.moves import plans
+
+        memo: dict[str, list[Any]] = {}
+
+        def plans_from(start: PData) -> list[Any]:
+            if start.key not in memo:
+                memo[start.key] = plans(start, goal, limit)
+            return memo[start.key]
+
+        return plans_from
+
+    def plans_from(start: PData) -> list[Any]:
+        return list(cached_plans(store, start, goal, limit))
+
+    return plans_from
+
+
+def straight_rope() -> tuple[np.ndarray, np.ndarray, PData]:
+    """The default initial configuration: ``RopeSim.reset()`` (q, link points, Top(q))."""
+    from twisted.sim import RopeSim
+
+    sim = RopeSim()
+    sim.reset()
+    return sim.state(), sim.link_points(), sim.p_data()
+
+
+def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
+    return Node(index=0, parent=None, q=q, points=points, p_data=p_data, curve=None, iteration=0, sim_call=0)
+
+
+def start_search(
+    store: Any,
+    goal: PData,
+    options: PlannerOptions,
+    pool: Pool,
+    sampler: CurveSampler | None = None,
+    start_configuration_id: int | None = None,
+    stop: StopSignals | None = None,
+    progress: Callable[[Twisted], None] | None = None,
+    extra_parameters: dict[str, Any] | None = None,
+) -> Twisted:
+    """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope or a stored configuration.
+
+    ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id).
+    """
+    from twisted.store.search import SearchRun
+
+    options.validate()
+    if start_configuration_id is None:
+        root = _root(*straight_rope())
+    else:
+        from sqlalchemy.exc import NoResultFound
+
+        from twisted.store.queries import load_configuration
+        from twisted.topology import top
+
+        with store.session() as session:
+            try:
+                config = load_configuration(session, start_configuration_id)
+            except NoResultFound:
+                message = f"configuration {start_configuration_id} is not in this database"
+                raise PlanInputError(message) from None
+            q, points = config.q_array(), config.points_array()
+        root = _root(q, points, top(points))
+    if root.p_data == goal:
+        raise PlanInputError(f"the initial configuration is already in the goal state {goal.key}")
+    tree = SearchTree()
+    tree.add(root)
+    rng = np.random.default_rng(options.seed)
+    first = Checkpoint(0, 0.0, 0, rng.bit_generator.state, {"state": {}, "plan": {}})
+    parameters = {**options.to_dict(), **(extra_parameters or {})}
+    recorder = SearchRun.create(store, goal, parameters, root, first, start_configuration_id)
+    return Twisted(
+        goal,
+        tree,
+        options,
+        pool,
+        high_level(store, goal, options.plan_limit),
+        sampler=sampler,
+        recorder=recorder,
+        run_id=recorder.run_id,
+        stop=stop,
+        progress=progress,
+    )
+
+
+def tree_from_rows(rows: Sequence[Any]) -> SearchTree:
+    """Rebuild ``T`` from stored nodes (``twisted.store.search.StoredNode``, in ``seq`` order)."""
+    from twisted.sim import Curve
+
+    tree = SearchTree()
+    for row in rows:
+        curve = None if row.curve is None else Curve(*row.curve)
+        node = Node(
+            index=row.seq,
+            parent=row.parent_seq,
+            q=row.q,
+            points=row.points,
+            p_data=row.p_data,
+            curve=curve,
+            iteration=row.iteration,
+            sim_call=row.sim_call,
+            created_s=row.created_s,
+            db_id=row.id,
+        )
+        tree.add(node)
+    return tree
+
+
+def resume_search(
+    store: Any,
+    run_id: int,
+    pool: Pool,
+    sampler: CurveSampler | None = None,
+    stop: StopSignals | None = None,
+    progress: Callable[[Twisted], None] | None = None,
+) -> Twisted:
+    """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
+    from twisted.store.search import SearchRun, discard_after_checkpoint, load_run
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"run {run_id} is not a planner run in this database")
+    if info.outcome == "solved":
+        raise PlanInputError(f"run {run_id} already solved its goal (see `twisted replay {run_id}`)")
+    if info.checkpoint is None:
+        raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
+    discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
+    info = load_run(store, run_id)
+    assert info is not None and info.checkpoint is not None
+    options = PlannerOptions.from_dict(info.parameters)
+    tree = tree_from_rows(info.nodes)
+    checkpoint = Checkpoint(
+        iteration=info.checkpoint.iteration,
+        elapsed_s=info.checkpoint.elapsed_s,
+        sim_calls=info.checkpoint.sim_calls,
+        rng_state=info.checkpoint.rng_state,
+        stats=info.checkpoint.stats,
+    )
+    node_ids = {node.index: node.db_id for node in tree.nodes if node.db_id is not None}
+    recorder = SearchRun(store, run_id, node_ids)
+    recorder.resumed()
+    return Twisted(
+        info.goal,
+        tree,
+        options,
+        pool,
+        high_level(store, info.goal, options.plan_limit),
+        sampler=sampler,
+        recorder=recorder,
+        checkpoint=checkpoint,
+        run_id=run_id,
+        stop=stop,
+        progress=progress,
+    )
+
+
+@dataclass
+class ReplayStep:
+    curve: Any
+    recorded: PData
+    replayed: PData | None  # None: the simulator rejected the result
+    reason: str | None = None
+
+    @property
+    def matches(self) -> bool:
+        return self.replayed == self.recorded
+
+
+@dataclass
+class ReplayResult:
+    run_id: int
+    goal: PData
+    steps: list[ReplayStep]
+
+    @property
+    def reached_goal(self) -> bool:
+        return bool(self.steps) and self.steps[-1].replayed == self.goal
+
+
+def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult:
+    """Re-simulate a solved run's plan from its initial configuration, in this process."""
+    from twisted.sim import Curve, RopeSim
+    from twisted.sim.pool import simulate
+    from twisted.store.search import load_run, solution_path
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"run {run_id} is not a planner run in this database")
+    path = solution_path(store, run_id)
+    if not path:
+        raise PlanInputError(f"run {run_id} has no plan to replay (outcome: {info.outcome})")
+    sim = RopeSim(friction_scale)
+    state = path[0].q
+    steps = []
+    for node in path[1:]:
+        assert node.curve is not None
+        curve = Curve(*node.curve)
+        result = simulate(sim, state, curve)
+        steps.append(ReplayStep(curve, node.p_data, result.p_data if result.ok else None, result.reason))
+        if not result.ok:
+            break
+        state = result.state
+    return ReplayResult(run_id, info.goal, steps)

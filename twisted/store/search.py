@@ -1,0 +1,473 @@
+"""The planner's search tree ``T`` in the store (Alembic revision 0004).
+
+Tables:
+
+- ``search_runs``: one row per planner run (its ``runs`` row has ``kind = 'plan'``): the goal, the
+  planner and heuristic, how it ended (``outcome``) and the node where the goal was reached.
+- ``search_nodes``: the vertices of ``T`` in creation order (``seq``; 0 is the root): the exact
+  configuration ``q`` and link points, the topological state, the curve from the parent (NULL for
+  the root), the iteration and simulator call that created it and the search time at that moment.
+- ``search_checkpoints``: the consistent cut of a run at an iteration boundary (iteration, elapsed
+  search time, simulator calls, the numpy RNG state, the selection statistics), written in the
+  same transaction as the nodes created up to that boundary.
+
+The found low-level plan is the path from the root to ``search_runs.goal_node_id`` (a recursive
+query over ``parent_id``; see :func:`solution_path` and the README). The high-level plans live in
+the plan cache (``twisted/store/plans.py``). This module knows no simulator: it stores arrays and
+numbers, and hands back plain records.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+from sqlalchemy import (
+    JSON,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    UniqueConstraint,
+    delete,
+    func,
+    select,
+    update,
+)
+from sqlalchemy.orm import Mapped, Session, mapped_column
+
+from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
+from twisted.store.queries import get_or_create_state
+from twisted.topology import PData, parse_p_data
+
+__all__ = [
+    "OUTCOMES",
+    "SearchCheckpoint",
+    "SearchNode",
+    "SearchRun",
+    "SearchRunInfo",
+    "SearchRunRow",
+    "StoredCheckpoint",
+    "StoredNode",
+    "find_resumable_run",
+    "load_run",
+    "solution_path",
+]
+
+# running: in progress (or killed without a chance to say so); the others are set when it stops.
+OUTCOMES = ("running", "solved", "timeout", "interrupted", "stopped")
+
+
+class SearchRunRow(Base):
+    """A planner run: goal, planner, heuristic and how it ended (the ``runs`` row has the timestamps)."""
+
+    __tablename__ = "search_runs"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
+    goal_state_id: Mapped[int] = mapped_column(ForeignKey("topological_states.id"), index=True)
+    goal_cross: Mapped[int] = mapped_column(Integer)
+    planner: Mapped[str] = mapped_column(String(32))
+    heuristic: Mapped[str] = mapped_column(String(16))
+    start_configuration_id: Mapped[int | None] = mapped_column(ForeignKey("configurations.id"))
+    outcome: Mapped[str] = mapped_column(String(16), default="running", index=True)
+    # No foreign key: search_nodes already refers to this table, and a cycle needs deferred constraints.
+    goal_node_id: Mapped[int | None] = mapped_column(Integer)
+
+
+class SearchNode(Base):
+    """A vertex of ``T``: configuration q (exact simulator state), state, and the curve from its parent."""
+
+    __tablename__ = "search_nodes"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    seq: Mapped[int] = mapped_column(Integer)  # creation order within the run, root = 0
+    parent_id: Mapped[int | None] = mapped_column(ForeignKey("search_nodes.id"), index=True)
+    state_id: Mapped[int] = mapped_column(ForeignKey("topological_states.id"), index=True)
+    cross: Mapped[int] = mapped_column(Integer)
+    q: Mapped[bytes] = mapped_column(LargeBinary)
+    points: Mapped[bytes] = mapped_column(LargeBinary)
+    link: Mapped[int | None] = mapped_column(Integer)
+    z_max_m: Mapped[float | None] = mapped_column(Float)
+    x_m: Mapped[float | None] = mapped_column(Float)
+    y_m: Mapped[float | None] = mapped_column(Float)
+    iteration: Mapped[int] = mapped_column(Integer)
+    sim_call: Mapped[int] = mapped_column(Integer)  # 1-based number of the simulation that produced it
+    created_s: Mapped[float] = mapped_column(Float)  # search time (s) when it was created
+
+    # (run_id, seq) is unique: resuming can never write a node twice.
+    __table_args__ = (UniqueConstraint("run_id", "seq", name="uq_search_nodes_run_id_seq"),)
+
+
+class SearchCheckpoint(Base):
+    """The latest consistent cut of a run; the nodes up to ``iteration`` are in ``search_nodes``."""
+
+    __tablename__ = "search_checkpoints"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
+    iteration: Mapped[int] = mapped_column(Integer)
+    elapsed_s: Mapped[float] = mapped_column(Float)
+    sim_calls: Mapped[int] = mapped_column(Integer)
+    nodes: Mapped[int] = mapped_column(Integer)
+    # JSON text written by us: PCG64's 128-bit integers must survive every backend exactly.
+    rng_state: Mapped[str] = mapped_column(Text)
+    stats: Mapped[dict[str, Any]] = mapped_column(JSON)
+    updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+# --- what the planner hands in ------------------------------------------------------------------------
+
+
+class NodeLike(Protocol):
+    """What :meth:`SearchRun.save` reads from a planner node."""
+
+    index: int
+    parent: int | None
+    q: np.ndarray
+    points: np.ndarray
+    p_data: PData
+    curve: Any | None  # has link, z_max_m, x_m, y_m
+    iteration: int
+    sim_call: int
+    created_s: float
+    db_id: int | None
+
+
+class CheckpointLike(Protocol):
+    iteration: int
+    elapsed_s: float
+    sim_calls: int
+    rng_state: dict[str, Any]
+    stats: dict[str, Any]
+
+
+@dataclass
+class StoredNode:
+    """A ``search_nodes`` row as plain values (``parent_seq`` instead of the row id)."""
+
+    id: int
+    seq: int
+    parent_seq: int | None
+    p_data: PData
+    q: npt.NDArray[np.float64]
+    points: npt.NDArray[np.float64]
+    curve: tuple[int, float, float, float] | None  # (link, z_max_m, x_m, y_m)
+    iteration: int
+    sim_call: int
+    created_s: float
+
+
+@dataclass
+class StoredCheckpoint:
+    iteration: int
+    elapsed_s: float
+    sim_calls: int
+    nodes: int
+    rng_state: dict[str, Any]
+    stats: dict[str, Any]
+
+
+@dataclass
+class SearchRunInfo:
+    """A planner run as stored: its parameters, outcome, checkpoint and (optionally) its tree."""
+
+    run_id: int
+    goal: PData
+    parameters: dict[str, Any]
+    outcome: str
+    status: str
+    start_configuration_id: int | None
+    goal_node_id: int | None
+    checkpoint: StoredCheckpoint | None
+    nodes: list[StoredNode]
+
+
+# --- writing a run ---------------------------------------------------------------------------------------
+
+
+class SearchRun:
+    """Writes one planner run: nodes and checkpoints in one transaction each, then the outcome."""
+
+    def __init__(self, store: Any, run_id: int, node_ids: dict[int, int] | None = None) -> None:
+        self.store = store
+        self.run_id = run_id
+        self._node_ids: dict[int, int] = dict(node_ids or {})  # seq -> search_nodes.id
+        self._state_ids: dict[str, int] = {}
+
+    @classmethod
+    def create(
+        cls,
+        store: Any,
+        goal: PData,
+        parameters: dict[str, Any],
+        root: NodeLike,
+        checkpoint: CheckpointLike,
+        start_configuration_id: int | None = None,
+    ) -> SearchRun:
+        """Insert the ``runs`` / ``search_runs`` rows, the root node and the first checkpoint."""
+        with store.session(write=True) as session:
+            run = Run(
+                kind="plan",
+                parameters={
+                    **parameters,
+                    "goal": goal.to_list(),
+                    "start_configuration_id": start_configuration_id,
+                },
+                seed=parameters.get("seed"),
+                status="running",
+                host=socket.gethostname(),
+                pid=os.getpid(),
+            )
+            session.add(run)
+            session.flush()
+            session.add(
+                SearchRunRow(
+                    run_id=run.id,
+                    goal_state_id=get_or_create_state(session, goal).id,
+                    goal_cross=goal.cross,
+                    planner=parameters.get("planner", "twisted"),
+                    heuristic=parameters.get("heuristic", "crs"),
+                    start_configuration_id=start_configuration_id,
+                    outcome="running",
+                )
+            )
+            recorder = cls(store, run.id)
+            recorder._write(session, [root], checkpoint)
+        return recorder
+
+    def _state_id(self, session: Session, p_data: PData) -> int:
+        key = p_data.key
+        if key not in self._state_ids:
+            self._state_ids[key] = get_or_create_state(session, p_data).id
+        return self._state_ids[key]
+
+    def _write(self, session: Session, nodes: Sequence[NodeLike], checkpoint: CheckpointLike) -> None:
+        pending: list[tuple[NodeLike, SearchNode]] = []
+
+        def flush() -> None:
+            session.flush()  # one multi-row INSERT ... RETURNING, in order
+            for node, row in pending:
+                self._node_ids[node.index] = row.id
+                node.db_id = row.id
+            pending.clear()
+
+        for node in nodes:
+            if node.parent is not None and node.parent not in self._node_ids:
+                flush()  # its parent is in this batch: its id must be known first
+            curve = node.curve
+            row = SearchNode(
+                run_id=self.run_id,
+                seq=node.index,
+                parent_id=None if node.parent is None else self._node_ids[node.parent],
+                state_id=self._state_id(session, node.p_data),
+                cross=node.p_data.cross,
+                q=array_to_blob(node.q),
+                points=array_to_blob(node.points),
+                link=None if curve is None else int(curve.link),
+                z_max_m=None if curve is None else float(curve.z_max_m),
+                x_m=None if curve is None else float(curve.x_m),
+                y_m=None if curve is None else float(curve.y_m),
+                iteration=node.iteration,
+                sim_call=node.sim_call,
+                created_s=float(node.created_s),
+            )
+            session.add(row)
+            pending.append((node, row))
+        flush()
+        values = {
+            "iteration": checkpoint.iteration,
+            "elapsed_s": float(checkpoint.elapsed_s),
+            "sim_calls": checkpoint.sim_calls,
+            "nodes": len(self._node_ids),
+            "rng_state": json.dumps(checkpoint.rng_state),
+            "stats": checkpoint.stats,
+            "updated_at": utcnow(),
+        }
+        existing = session.get(SearchCheckpoint, self.run_id)
+        if existing is None:
+            session.add(SearchCheckpoint(run_id=self.run_id, **values))
+        else:
+            for name, value in values.items():
+                setattr(existing, name, value)
+        # the generic counters of runs: simulator calls tried, nodes kept, search time
+        session.execute(
+            update(Run)
+            .where(Run.id == self.run_id)
+            .values(
+                tried=checkpoint.sim_calls,
+                kept=len(self._node_ids),
+                wall_seconds=float(checkpoint.elapsed_s),
+            )
+        )
+
+    def save(self, nodes: Sequence[NodeLike], checkpoint: CheckpointLike) -> None:
+        """Write ``nodes`` (setting their ``db_id``) and ``checkpoint`` in one transaction."""
+        with self.store.session(write=True) as session:
+            self._write(session, nodes, checkpoint)
+
+    def resumed(self) -> None:
+        """Mark the run as running again (this process) after a resume."""
+        with self.store.session(write=True) as session:
+            session.execute(
+                update(Run)
+                .where(Run.id == self.run_id)
+                .values(status="running", ended_at=None, host=socket.gethostname(), pid=os.getpid())
+            )
+            session.execute(
+                update(SearchRunRow).where(SearchRunRow.run_id == self.run_id).values(outcome="running")
+            )
+
+    def finish(self, outcome: str, goal_node: NodeLike | None, checkpoint: CheckpointLike) -> None:
+        """Record how the run ended: solved / timeout / interrupted / stopped."""
+        if outcome not in OUTCOMES:
+            raise ValueError(f"unknown outcome {outcome!r}")
+        goal_id = None
+        if goal_node is not None:
+            goal_id = goal_node.db_id if goal_node.db_id is not None else self._node_ids.get(goal_node.index)
+        with self.store.session(write=True) as session:
+            session.execute(
+                update(SearchRunRow)
+                .where(SearchRunRow.run_id == self.run_id)
+                .values(outcome=outcome, goal_node_id=goal_id)
+            )
+            session.execute(
+                update(Run)
+                .where(Run.id == self.run_id)
+                .values(
+                    status="interrupted" if outcome == "interrupted" else "finished",
+                    ended_at=utcnow(),
+                    message=outcome,
+                    wall_seconds=float(checkpoint.elapsed_s),
+                )
+            )
+
+
+# --- reading runs ------------------------------------------------------------------------------------------
+
+
+def _checkpoint(row: SearchCheckpoint | None) -> StoredCheckpoint | None:
+    if row is None:
+        return None
+    return StoredCheckpoint(
+        iteration=row.iteration,
+        elapsed_s=row.elapsed_s,
+        sim_calls=row.sim_calls,
+        nodes=row.nodes,
+        rng_state=json.loads(row.rng_state),
+        stats=dict(row.stats or {}),
+    )
+
+
+def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[StoredNode]:
+    query = (
+        select(SearchNode, TopologicalState.key)
+        .join(TopologicalState, TopologicalState.id == SearchNode.state_id)
+        .where(SearchNode.run_id == run_id)
+        .order_by(SearchNode.seq)
+    )
+    if where is not None:
+        query = query.where(where)
+    seq_of: dict[int, int] = {}
+    out = []
+    for row, key in session.execute(query):
+        seq_of[row.id] = row.seq
+        curve = None if row.link is None else (row.link, row.z_max_m, row.x_m, row.y_m)
+        out.append(
+            StoredNode(
+                id=row.id,
+                seq=row.seq,
+                parent_seq=None if row.parent_id is None else seq_of.get(row.parent_id),
+                p_data=parse_p_data(key),
+                q=blob_to_array(row.q),
+                points=blob_to_array(row.points, (-1, 3)),
+                curve=curve,
+                iteration=row.iteration,
+                sim_call=row.sim_call,
+                created_s=row.created_s,
+            )
+        )
+    return out
+
+
+def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo | None:
+    """A planner run, or None when ``run_id`` is not one. ``with_nodes`` loads the whole tree."""
+    with store.session() as session:
+        row = session.get(SearchRunRow, run_id)
+        run = session.get(Run, run_id)
+        if row is None or run is None:
+            return None
+        goal_key = session.scalar(
+            select(TopologicalState.key).where(TopologicalState.id == row.goal_state_id)
+        )
+        checkpoint = _checkpoint(session.get(SearchCheckpoint, run_id))
+        nodes = _nodes(session, run_id) if with_nodes else []
+        return SearchRunInfo(
+            run_id=run_id,
+            goal=parse_p_data(goal_key or "[]"),
+            parameters=dict(run.parameters or {}),
+            outcome=row.outcome,
+            status=run.status,
+            start_configuration_id=row.start_configuration_id,
+            goal_node_id=row.goal_node_id,
+            checkpoint=checkpoint,
+            nodes=nodes,
+        )
+
+
+def discard_after_checkpoint(store: Any, run_id: int) -> int:
+    """Delete nodes newer than the run's checkpoint (none, when every write went through :class:`SearchRun`).
+
+    Returns how many were deleted.
+    """
+    with store.session(write=True) as session:
+        checkpoint = session.get(SearchCheckpoint, run_id)
+        if checkpoint is None:
+            return 0
+        doomed = select(SearchNode.id).where(
+            SearchNode.run_id == run_id, SearchNode.iteration > checkpoint.iteration
+        )
+        count = session.scalar(select(func.count()).select_from(doomed.subquery())) or 0
+        if count:
+            session.execute(delete(SearchNode).where(SearchNode.id.in_(doomed)))
+        return int(count)
+
+
+def find_resumable_run(store: Any, goal: PData | None = None) -> int | None:
+    """The newest planner run that did not solve its goal (for ``goal`` when given), or None."""
+    with store.session() as session:
+        query = select(SearchRunRow.run_id).where(SearchRunRow.outcome != "solved")
+        if goal is not None:
+            query = query.join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id).where(
+                TopologicalState.key == goal.key
+            )
+        return session.scalar(query.order_by(SearchRunRow.run_id.desc()).limit(1))
+
+
+def solution_path(store: Any, run_id: int) -> list[StoredNode]:
+    """The nodes from the root to the goal node of a solved run (empty when it has none)."""
+    with store.session() as session:
+        row = session.get(SearchRunRow, run_id)
+        if row is None or row.goal_node_id is None:
+            return []
+        # walk parent links in SQL (the README shows the same query as a recursive CTE)
+        path = select(SearchNode.id, SearchNode.parent_id).where(SearchNode.id == row.goal_node_id).cte(
+            "path", recursive=True
+        )
+        path = path.union_all(
+            select(SearchNode.id, SearchNode.parent_id).join(path, SearchNode.id == path.c.parent_id)
+        )
+        ids = set(session.scalars(select(path.c.id)))
+        nodes = _nodes(session, run_id, SearchNode.id.in_(ids))
+        # parent_seq above only resolves parents seen earlier in this partial load, which holds here:
+        # the path is loaded in seq order and every parent precedes its child
+        return nodes
