@@ -136,6 +136,11 @@ def p_data_of_drawing(crossings: Sequence[CrossingDrawing]) -> PData:
     return PData(tuple(sorted(visits)))
 
 
+def _unit(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0 else np.array([1.0, 0.0])
+
+
 def _arc_length(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     seg = np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1)
     return np.concatenate([[0.0], np.cumsum(seg)])
@@ -177,20 +182,18 @@ def draw_knot_diagram(
     ax.plot(pts[-1, 0], pts[-1, 1], "o", mfc="white", mec="black", ms=8, zorder=4, label="tail (link 20)")
     if label_visits:
         span = float(np.ptp(pts[:, :2], axis=0).max()) or 1.0
-        off = 0.045 * span
+        off = max(0.05 * span, 0.03)
         for c in crossings:
             x, y = c.xy
             ax.plot(x, y, ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
-            for seg, visit, kind, sgn in (
-                (c.over_segment, c.over_visit, "O", 1),
-                (c.under_segment, c.under_visit, "U", -1),
-            ):
-                # Put each visit's label beside its own strand, on the normal of that strand.
-                dxy = pts[seg + 1, :2] - pts[seg, :2]
-                n = np.array([-dxy[1], dxy[0]]) / (np.linalg.norm(dxy) or 1.0)
+            d_o = _unit(pts[c.over_segment + 1, :2] - pts[c.over_segment, :2])
+            d_u = _unit(pts[c.under_segment + 1, :2] - pts[c.under_segment, :2])
+            # each label sits on its own strand; the under one on the side farther from the over one
+            s_u = 1.0 if np.linalg.norm(d_o - d_u) >= np.linalg.norm(d_o + d_u) else -1.0
+            for visit, kind, direction in ((c.over_visit, "O", d_o), (c.under_visit, "U", s_u * d_u)):
                 ax.annotate(
                     f"{visit}{kind}{c.sign}",
-                    (x + sgn * off * n[0], y + sgn * off * n[1]),
+                    (x + off * direction[0], y + off * direction[1]),
                     ha="center",
                     va="center",
                     fontsize=8,
@@ -198,8 +201,8 @@ def draw_knot_diagram(
                     zorder=6,
                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
                 )
-    ax.set_aspect("equal")
     ax.margins(0.12)
+    ax.set_aspect("equal", adjustable="datalim")  # fill the panel rather than shrink it
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.legend(loc="best", fontsize=7, frameon=False)
@@ -294,6 +297,169 @@ def save_gif(frames: Sequence[npt.NDArray[np.uint8]], path: str | Path, frame_s:
     return out
 
 
+# ---------------------------------------------------------------- pictures of stored things
+
+
+class RenderError(ValueError):
+    """Something asked for cannot be drawn (unknown id, a run without a plan); the message says why."""
+
+
+@dataclass
+class Rendered:
+    """Files written and how the rope was drawn (``backend``: egl/osmesa, or ``matplotlib`` + why)."""
+
+    files: list[Path]
+    backend: str
+
+
+def _panel_figure(gl_image: npt.NDArray[np.uint8] | None) -> tuple[Figure, Axes | None, Axes]:
+    if gl_image is None:
+        fig, ax = plt.subplots(figsize=(6.4, 5.2))
+        return fig, None, ax
+    fig, (ax_gl, ax) = plt.subplots(1, 2, figsize=(12.8, 5.2), gridspec_kw={"width_ratios": [1.25, 1]})
+    ax_gl.imshow(gl_image)
+    ax_gl.axis("off")
+    ax_gl.set_title("MuJoCo, from above", fontsize=9)
+    return fig, ax_gl, ax
+
+
+def _draw_curve(ax: Axes, points: npt.NDArray[np.float64], curve: Sequence[float]) -> None:
+    """The next curve as an arrow: from the grasped link's centre by its (x, y) displacement."""
+    link, z_max_m, x_m, y_m = curve
+    i = int(link)
+    centre = (points[i, :2] + points[i + 1, :2]) / 2
+    ax.annotate(
+        "",
+        xy=(centre[0] + x_m, centre[1] + y_m),
+        xytext=(centre[0], centre[1]),
+        arrowprops={"arrowstyle": "->", "color": "#2166ac", "lw": 1.6, "ls": "--"},
+        zorder=7,
+    )
+    ax.annotate(
+        f"link {i}, z {z_max_m * 100:.1f} cm",
+        (centre[0] + x_m, centre[1] + y_m),
+        fontsize=7,
+        color="#2166ac",
+        xytext=(4, 4),
+        textcoords="offset points",
+    )
+    # keep the arrow head inside the axes
+    ax.update_datalim([(centre[0] + x_m, centre[1] + y_m)])
+    ax.autoscale_view()
+
+
+def render_configuration(store: Any, configuration_id: int, out: str | Path, *, gl: bool = True) -> Rendered:
+    """PNG of a stored configuration: MuJoCo top view (if OpenGL works) beside its knot diagram."""
+    from twisted.store.models import Configuration, TopologicalState
+
+    with store.session() as session:
+        row = session.get(Configuration, configuration_id)
+        if row is None:
+            raise RenderError(f"configuration {configuration_id} is not in this database")
+        q, points = row.q_array(), row.points_array()
+        key = session.get(TopologicalState, row.state_id).key
+    images, backend = gl_top_views([q]) if gl else (None, "OpenGL not requested (--no-gl)")
+    fig, _, ax = _panel_figure(images[0] if images else None)
+    draw_knot_diagram(ax, points, title=f"configuration {configuration_id}: {key}")
+    if images is None:
+        fig.text(
+            0.01,
+            0.005,
+            f"drawn from the link points (MuJoCo rendering unavailable: {backend})"[:160],
+            fontsize=6,
+        )
+    path = save_png(fig, out)
+    return Rendered([path], backend if images is not None else f"matplotlib ({backend})")
+
+
+def find_drawing(store: Any, p_data: PData) -> tuple[str, npt.NDArray[np.float64]] | None:
+    """Link points of some stored rope in state ``p_data`` (collected data first, then search trees)."""
+    from sqlalchemy import select
+
+    from twisted.store.models import Configuration, TopologicalState
+
+    with store.session() as session:
+        state_id = session.scalar(select(TopologicalState.id).where(TopologicalState.key == p_data.key))
+        if state_id is None:
+            return None
+        row = session.scalars(
+            select(Configuration)
+            .where(Configuration.state_id == state_id)
+            .order_by(Configuration.id)
+            .limit(1)
+        ).first()
+        if row is not None:
+            return f"configuration {row.id}", row.points_array()
+        try:
+            from twisted.store.search import SearchNode
+        except ImportError:  # the planner's tables are not part of this installation
+            return None
+        node = session.scalars(
+            select(SearchNode).where(SearchNode.state_id == state_id).order_by(SearchNode.id).limit(1)
+        ).first()
+        if node is not None:
+            from twisted.store.models import blob_to_array
+
+            return f"search node {node.id} of run {node.run_id}", blob_to_array(node.points, (-1, 3))
+    return None
+
+
+def render_goal(store: Any | None, p_data: PData, out: str | Path) -> Rendered:
+    """PNG of a P-data state: a stored rope in that state as a knot diagram (if any) and its Gauss diagram."""
+    found = find_drawing(store, p_data) if store is not None else None
+    if found is None:
+        fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(p_data.visits) + 2), 3.8))
+        draw_gauss_diagram(ax, p_data, title=f"{p_data.key}\n(no stored rope has this state: Gauss diagram)")
+        return Rendered([save_png(fig, out)], "gauss")
+    source, points = found
+    fig, (ax_k, ax_g) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.1, 1]})
+    crossings = draw_knot_diagram(ax_k, points, title=f"{p_data.key}\nas reached by {source}")
+    if p_data_of_drawing(crossings) != p_data:  # never expected: the store keeps Top(points)
+        raise RenderError(
+            f"{source} is stored as {p_data.key} but its points give {p_data_of_drawing(crossings)}"
+        )
+    draw_gauss_diagram(ax_g, p_data)
+    return Rendered([save_png(fig, out)], "knot")
+
+
+def render_run(
+    store: Any, run_id: int, out_png: str | Path, out_gif: str | Path | None = None, *, gl: bool = True
+) -> Rendered:
+    """A solved planner run: PNG of the final rope and a GIF of the plan, one frame per curve.
+
+    The frames are the configurations stored in the search tree along the found path (the exact
+    states the planner reached; ``twisted replay`` re-simulates them). Each frame shows the next
+    curve as an arrow.
+    """
+    from twisted.store.search import load_run, solution_path
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise RenderError(f"run {run_id} is not a planner run in this database")
+    path = solution_path(store, run_id)
+    if not path:
+        raise RenderError(f"run {run_id} found no plan (outcome: {info.outcome}); nothing to draw")
+    images, backend = gl_top_views([n.q for n in path]) if gl else (None, "OpenGL not requested (--no-gl)")
+    n_steps = len(path) - 1
+
+    def frame(i: int) -> Figure:
+        node = path[i]
+        fig, _, ax = _panel_figure(images[i] if images else None)
+        what = "start" if i == 0 else f"after curve {i}/{n_steps}"
+        goal_mark = "  = goal" if node.p_data == info.goal else ""
+        draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
+        if i < n_steps and path[i + 1].curve is not None:
+            _draw_curve(ax, node.points, path[i + 1].curve)
+        return fig
+
+    files = [save_png(frame(n_steps), out_png)]
+    if out_gif is not None:
+        frames = [figure_to_array(frame(i), dpi=80) for i in range(len(path))]
+        frames.append(frames[-1])  # hold the final state a little longer
+        files.append(save_gif(frames, out_gif, frame_s=1.0))
+    return Rendered(files, backend if images is not None else f"matplotlib ({backend})")
+
+
 # ---------------------------------------------------------------- MuJoCo offscreen top view
 
 
@@ -377,10 +543,15 @@ def _gl_worker(src: str, dst: str, friction_scale: float, width: int, height: in
     images = []
     with np.load(src) as f:
         states = f["states"]
+    # one camera for every frame (a replay must not jump), framing all the states
+    all_points = []
+    for state in states:
+        sim.set_state(state)
+        all_points.append(sim.link_points())
+    cam = _top_camera(np.concatenate(all_points), width / height)
     with mujoco.Renderer(model, height=height, width=width) as renderer:
         for state in states:
             sim.set_state(state)
-            cam = _top_camera(sim.link_points(), width / height)
             renderer.update_scene(data, camera=cam)
             images.append(renderer.render().copy())
     np.savez(dst, images=np.stack(images))

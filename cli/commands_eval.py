@@ -1,0 +1,445 @@
+"""Experiments: `twisted problems make|import|list`, `twisted eval`, `twisted report`,
+`twisted sensitivity run|plot`, `twisted discretise`, `twisted render`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from cli.app import app, console, db_url, err_console, fail
+
+problems_app = typer.Typer(
+    no_args_is_help=True, help="Goal sets for evaluations (made from our data or imported)."
+)
+sensitivity_app = typer.Typer(
+    no_args_is_help=True, help="Friction sensitivity: evaluate at 95/100/105 % and plot."
+)
+app.add_typer(problems_app, name="problems")
+app.add_typer(sensitivity_app, name="sensitivity")
+
+
+def _store(ctx: typer.Context) -> Any:
+    from twisted.store import StoreError, open_store
+
+    try:
+        return open_store(db_url(ctx))
+    except StoreError as exc:
+        fail(str(exc))
+
+
+def _print_sets(records: list[Any]) -> None:
+    table = Table("set", "goals", "cross", "frequency (min-max)", "tags")
+    for r in records:
+        freqs = [p.frequency for p in r.problems]
+        tags = sorted({p.tag for p in r.problems})
+        crosses = sorted({p.p_data.cross for p in r.problems})
+        table.add_row(
+            r.name,
+            str(len(r.problems)),
+            ",".join(map(str, crosses)),
+            f"{min(freqs)}-{max(freqs)}" if freqs else "-",
+            ", ".join(tags),
+        )
+    console.print(table)
+
+
+@problems_app.command("make")
+def problems_make(
+    ctx: typer.Context,
+    seed: int = typer.Option(0, "--seed", help="Seed of the draw; the same seed gives the same sets."),
+    per_set: int = typer.Option(10, "--per-set", min=1, help="Goals per set (10 in the paper)."),
+    prefix: str = typer.Option("", "--prefix", help="Prefix of the set names (e.g. 's1-' -> s1-easy)."),
+    replace: bool = typer.Option(
+        False, "--replace", help="Replace sets of the same name that have no results."
+    ),
+    sets: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set", help="Only these sets (easy, medium, hard, unseen-3, 4); repeatable. Default: all."
+        ),
+    ] = None,
+) -> None:
+    """Make easy/medium/hard (3-crossing states by visit frequency), unseen-3 and 4 from our data."""
+    from twisted.evaluate import ALL_MADE_SETS, EvalInputError, make_problem_sets_in_store
+
+    with _store(ctx) as store:
+        try:
+            records = make_problem_sets_in_store(
+                store, per_set=per_set, seed=seed, prefix=prefix, replace=replace, sets=sets or ALL_MADE_SETS
+            )
+        except EvalInputError as exc:
+            fail(str(exc))
+    _print_sets(records)
+
+
+@problems_app.command("import")
+def problems_import(
+    ctx: typer.Context,
+    file: Annotated[Path, typer.Argument(help="JSON: a list of P-data, or an object of named lists.")],
+    name: str = typer.Option(
+        None, "--name", help="Set name (a list) or prefix of the set names (an object)."
+    ),
+) -> None:
+    """Import goal sets from a JSON file (every state is checked; nothing is stored on an error)."""
+    from twisted.evaluate import EvalInputError, import_problem_sets
+
+    try:
+        text = file.read_text()
+    except OSError as exc:
+        fail(f"cannot read goal file {str(file)!r}: {exc.strerror}")
+    with _store(ctx) as store:
+        try:
+            records = import_problem_sets(store, text, name)
+        except EvalInputError as exc:
+            fail(f"{file}: {exc}")
+    _print_sets(records)
+
+
+@problems_app.command("list")
+def problems_list(
+    ctx: typer.Context,
+    show: str = typer.Option(None, "--show", help="Also print the goals of this set."),
+    as_json: bool = typer.Option(False, "--json", help="Print the goals of --show as JSON (importable)."),
+) -> None:
+    """The stored problem sets (and the goals of one with --show)."""
+    from twisted.store.experiments import list_problem_sets, load_problem_set
+
+    with _store(ctx) as store, store.session() as session:
+        sets = list_problem_sets(session)
+        record = load_problem_set(session, show) if show else None
+    if show and record is None:
+        fail(f"no problem set {show!r}: see `twisted problems list`")
+    if record is not None and as_json:
+        console.print_json(json.dumps([p.p_data.to_list() for p in record.problems]))
+        return
+    table = Table("id", "set", "source", "seed", "goals", "cross", "frequency", "results")
+    for s in sets:
+        table.add_row(
+            str(s["id"]),
+            s["name"],
+            s["source"],
+            "-" if s["seed"] is None else str(s["seed"]),
+            str(s["problems"]),
+            "-".join(map(str, sorted(set(s["cross"])))) if s["cross"][0] is not None else "-",
+            f"{s['frequency'][0]}-{s['frequency'][1]}" if s["frequency"][0] is not None else "-",
+            str(s["results"]),
+        )
+    console.print(table)
+    if record is not None:
+        goals = Table("#", "goal", "cross", "frequency", "tag")
+        for p in record.problems:
+            goals.add_row(str(p.idx), p.p_data.key, str(p.p_data.cross), str(p.frequency), p.tag)
+        console.print(goals)
+
+
+def _eval(
+    ctx: typer.Context,
+    set_name: str,
+    planner: str,
+    timeout_s: float,
+    workers: int,
+    seeds: list[int],
+    friction_scale: float,
+    parallel: int,
+    options: dict[str, Any],
+) -> Any:
+    from twisted.evaluate import EvalInputError, run_eval
+
+    columns = (
+        TextColumn(f"[bold]{set_name} / {planner} / friction {friction_scale:g}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("solved {task.fields[solved]}"),
+        TimeElapsedColumn(),
+    )
+    with _store(ctx) as store, Progress(*columns, console=console) as bar:
+        task_id = None
+
+        def on_start(summary: Any, pending: int) -> None:
+            nonlocal task_id
+            if summary.already_done:
+                console.print(f"{summary.already_done} of {summary.total} already finished: not rerun")
+            task_id = bar.add_task("eval", total=pending, solved=0)
+
+        def on_outcome(outcome: Any, summary: Any) -> None:
+            bar.update(task_id, advance=1, solved=summary.solved)
+            if outcome.status == "failed":
+                err_console.print(f"goal {outcome.goal_key} seed {outcome.seed} failed: {outcome.message}")
+
+        try:
+            summary = run_eval(
+                store,
+                db_url(ctx),
+                set_name,
+                planner,
+                timeout_s=timeout_s,
+                seeds=seeds,
+                friction_scale=friction_scale,
+                workers=workers,
+                parallel=parallel,
+                options=options,
+                on_start=on_start,
+                on_outcome=on_outcome,
+            )
+        except EvalInputError as exc:
+            fail(str(exc))
+        except KeyboardInterrupt:
+            err_console.print(
+                "interrupted: finished goals are stored; run the same command again to continue"
+            )
+            raise typer.Exit(130) from None
+    counts: dict[str, int] = {}
+    for o in summary.outcomes:
+        counts[o.status] = counts.get(o.status, 0) + 1
+    console.print(
+        f"eval run {summary.eval_run_id}: {summary.total} goal x seed, {summary.already_done} done before, "
+        + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+    )
+    return summary
+
+
+def _parse_seeds(text: str) -> list[int]:
+    """'0 1 2', '0,1,2', '0-4' or a mix -> sorted distinct seeds (exit 2 on anything else)."""
+    seeds: set[int] = set()
+    for part in text.replace(",", " ").split():
+        try:
+            if "-" in part[1:]:
+                lo, hi = part.split("-", 1)
+                first, last = int(lo), int(hi)
+                if last < first:
+                    raise ValueError
+                seeds.update(range(first, last + 1))
+            else:
+                seeds.add(int(part))
+        except ValueError:
+            fail(f"--seeds: {part!r} is not a seed or a range like 0-4 (give e.g. '0 1 2' or '0-4')")
+    if not seeds:
+        fail("--seeds: give at least one seed")
+    return sorted(seeds)
+
+
+def _planner_options(heuristic: str | None, model_id: int | None) -> dict[str, Any]:
+    options: dict[str, Any] = {}
+    if heuristic is not None:
+        options["heuristic"] = heuristic
+    if model_id is not None:
+        options["model_id"] = model_id
+    return options
+
+
+def _default_parallel() -> int:
+    from twisted.sim import default_workers
+
+    return default_workers()
+
+
+@app.command("eval")
+def eval_command(
+    ctx: typer.Context,
+    set_name: str = typer.Option(..., "--set", help="Problem set (see `twisted problems list`)."),
+    planner: str = typer.Option("twisted", "--planner", help="twisted, random-low or low-level-only."),
+    timeout_s: float = typer.Option(
+        1800.0, "--timeout", help="Search time per goal in seconds (paper: 1800)."
+    ),
+    workers: int = typer.Option(
+        1, "--workers", min=1, help="Simulator processes per planner (1 = in-process)."
+    ),
+    seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
+    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (0.95/1.05)."),
+    parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
+    heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
+    model_id: int = typer.Option(None, "--model", help="Inverse model id for `twisted` (default: newest)."),
+) -> None:
+    """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
+    parallel = parallel or _default_parallel()
+    _eval(
+        ctx,
+        set_name,
+        planner,
+        timeout_s,
+        workers,
+        _parse_seeds(seeds),
+        friction_scale,
+        parallel,
+        _planner_options(heuristic, model_id),
+    )
+
+
+@app.command("report")
+def report_command(
+    ctx: typer.Context,
+    out: Annotated[Path, typer.Option("--out", help="Folder for report.md and the PNG plots.")] = Path(
+        "report"
+    ),
+    sets: Annotated[list[str] | None, typer.Option("--set", help="Only these sets (repeatable).")] = None,
+) -> None:
+    """Success-vs-time curves (PNG, one per set) and a Markdown table from the stored results."""
+    from twisted.evaluate import write_report
+
+    with _store(ctx) as store:
+        files = write_report(store, out, sets or None)
+    console.print(f"wrote {files.markdown}")
+    for p in files.plots + files.sensitivity:
+        console.print(f"wrote {p}")
+    if not files.plots:
+        err_console.print("no finished evaluation results yet: run `twisted eval` first")
+
+
+@sensitivity_app.command("run")
+def sensitivity_run(
+    ctx: typer.Context,
+    set_name: str = typer.Option(..., "--set", help="Problem set."),
+    planner: str = typer.Option("twisted", "--planner"),
+    timeout_s: float = typer.Option(1800.0, "--timeout", help="Search time per goal in seconds."),
+    scales: Annotated[
+        list[float] | None, typer.Option("--scales", help="Friction factors (default 0.95 1.0 1.05); repeat.")
+    ] = None,
+    seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
+    workers: int = typer.Option(1, "--workers", min=1),
+    parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
+    heuristic: str = typer.Option(None, "--heuristic"),
+    model_id: int = typer.Option(None, "--model"),
+) -> None:
+    """Evaluate one planner on a set at several friction scales (finished results are reused)."""
+    parallel = parallel or _default_parallel()
+    options = _planner_options(heuristic, model_id)
+    for scale in scales or [0.95, 1.0, 1.05]:
+        _eval(
+            ctx,
+            set_name,
+            planner,
+            timeout_s,
+            workers,
+            _parse_seeds(seeds),
+            scale,
+            parallel,
+            options,
+        )
+
+
+@sensitivity_app.command("plot")
+def sensitivity_plot(
+    ctx: typer.Context,
+    out: Annotated[Path, typer.Option("--out", help="Folder for the PNG plots.")] = Path("report"),
+    sets: Annotated[list[str] | None, typer.Option("--set", help="Only these sets (repeatable).")] = None,
+) -> None:
+    """Friction plots (one line per scale) for every set/planner evaluated at several scales."""
+    from twisted.evaluate import write_report
+
+    with _store(ctx) as store:
+        files = write_report(store, out, sets or None)
+    if not files.sensitivity:
+        fail(
+            "no set/planner has finished results at more than one friction scale: "
+            "run `twisted sensitivity run`"
+        )
+    for p in files.sensitivity:
+        console.print(f"wrote {p}")
+
+
+@app.command("discretise")
+def discretise_command(
+    ctx: typer.Context,
+    n: int = typer.Option(1000, "--n", min=1, help="Stored transitions to re-simulate."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the draw of transitions."),
+    from_cross: int = typer.Option(2, "--from-cross", help="Transitions from this crossing count (-1: any)."),
+    to_cross: int = typer.Option(3, "--to-cross", help="... to this crossing count (-1: any)."),
+    workers: int = typer.Option(0, "--workers", min=0, help="Simulator processes (0 = one per CPU core)."),
+    friction_scale: float = typer.Option(
+        None, "--friction-scale", help="Also re-simulate the unrounded curve at this friction (e.g. 1.05)."
+    ),
+) -> None:
+    """Discretisation experiment (paper 5.1): share of transitions whose state changes when rounded."""
+    from twisted.evaluate import PAPER_DISCRETISATION_CHANGED, EvalInputError, run_discretisation
+
+    workers = workers or _default_parallel()
+    columns = (TextColumn("[bold]re-simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with _store(ctx) as store, Progress(*columns, console=console) as bar:
+        task_id = bar.add_task("discretise", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task_id, completed=done, total=total)
+
+        try:
+            summary = run_discretisation(
+                store,
+                n=n,
+                seed=seed,
+                from_cross=None if from_cross < 0 else from_cross,
+                to_cross=None if to_cross < 0 else to_cross,
+                workers=workers,
+                friction_scale=friction_scale,
+                progress=progress,
+            )
+        except EvalInputError as exc:
+            fail(str(exc))
+    table = Table("variant", "friction", "transitions", "changed", "share changed", "rejected")
+    for v in summary.variants:
+        table.add_row(
+            v.variant,
+            f"{v.friction_scale:g}",
+            str(v.transitions),
+            str(v.changed),
+            f"{v.share_changed:.1%}",
+            str(v.rejected),
+        )
+    console.print(table)
+    tested = summary.variants[0].transitions if summary.variants else 0
+    console.print(
+        f"run {summary.run_id}: {tested} of {summary.available} matching transitions re-simulated; "
+        f"the paper: {PAPER_DISCRETISATION_CHANGED:.0%} changed when rounded"
+    )
+
+
+@app.command("render")
+def render_command(
+    ctx: typer.Context,
+    config: int = typer.Option(None, "--config", help="A configuration id: PNG of the rope."),
+    run: int = typer.Option(
+        None, "--run", help="A solved planner run: PNG of the final rope + GIF of the plan."
+    ),
+    goal: str = typer.Option(None, "--goal", help="A P-data state (JSON): knot diagram / Gauss diagram."),
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output PNG (default: config-ID.png, run-ID.png, goal.png).")
+    ] = None,
+    gif: Annotated[
+        Path | None, typer.Option("--gif", help="Output GIF of --run (default: beside the PNG).")
+    ] = None,
+    gl: bool = typer.Option(
+        True, "--gl/--no-gl", help="Use MuJoCo's offscreen OpenGL (EGL/OSMesa) if it works."
+    ),
+) -> None:
+    """Draw a configuration, a run's plan or a goal state (look before you read)."""
+    from twisted.render import RenderError, render_configuration, render_goal, render_run
+    from twisted.topology import PDataError
+
+    chosen = [
+        name for name, value in (("--config", config), ("--run", run), ("--goal", goal)) if value is not None
+    ]
+    if len(chosen) != 1:
+        fail("give exactly one of --config ID, --run ID or --goal P-DATA")
+    with _store(ctx) as store:
+        try:
+            if config is not None:
+                rendered = render_configuration(store, config, out or Path(f"config-{config}.png"), gl=gl)
+            elif run is not None:
+                png = out or Path(f"run-{run}.png")
+                rendered = render_run(store, run, png, gif or png.with_suffix(".gif"), gl=gl)
+            else:
+                from twisted.moves import parse_state
+
+                try:
+                    p_data = parse_state(goal, "--goal")
+                except PDataError as exc:
+                    fail(str(exc))
+                rendered = render_goal(store, p_data, out or Path("goal.png"))
+        except RenderError as exc:
+            fail(str(exc))
+    for path in rendered.files:
+        console.print(f"wrote {path}")
+    console.print(f"drawn with: {rendered.backend}")
