@@ -108,11 +108,19 @@ def test_preprocess_is_invariant_to_table_translation_and_rotation(
 def test_crossing_features_agree_with_top(seed: int) -> None:
     pts = random_rope(seed, bend=0.7)
     p = top(pts)
-    feats = crossing_features(torch.as_tensor(pts, dtype=torch.float64)[None])[0]
+    pairs, visits = crossing_features(torch.as_tensor(pts, dtype=torch.float64)[None])
+    feats = pairs[0]
     hits = feats[: len(feats) // 2]
     assert int((hits != 0).sum()) == p.cross
     over_signs = sorted(s for _, _, s in p.crossings())
     assert sorted(int(v) for v in feats[len(feats) // 2 :] if v != 0) == over_signs
+    # visit slots follow P-data's numbering: present for 1..2n, over/under as in P-data, along the rope
+    slots = visits[0].reshape(12, 5)
+    n = 2 * p.cross
+    assert slots[:n, 0].tolist() == [1.0] * n and not slots[n:].any()
+    assert [("O" if o > 0 else "U") for o in slots[:n, 4]] == [v.over for v in p.visits]
+    arcs = slots[:n, 1]
+    assert bool((arcs[1:] >= arcs[:-1]).all())
 
 
 def test_canonical_frame_puts_the_head_to_tail_axis_on_plus_x() -> None:

@@ -10,7 +10,7 @@ so validation never contains a start configuration seen in training.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,9 +23,17 @@ from twisted.model.encoding import MAX_CROSSINGS, P_DATA_DIM, encode_p_data
 from twisted.sim import N_POINTS
 from twisted.store.db import Store
 from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
-from twisted.topology import parse_p_data
+from twisted.topology import PData, parse_p_data
 
-__all__ = ["NoTrainingDataError", "TransitionData", "load_transitions", "max_transition_id", "split_by_start"]
+__all__ = [
+    "NoTrainingDataError",
+    "TransitionData",
+    "encode_states",
+    "load_transitions",
+    "max_transition_id",
+    "split_by_start",
+    "transitions_from_samples",
+]
 
 CHUNK_SIZE = 4096
 
@@ -141,9 +149,8 @@ def load_transitions(
         )
         i = 0
         for partition in session.execute(stmt).partitions():
-            for row in partition:
-                if i >= n:  # rows committed after the COUNT (a collector is running): not ours
-                    break
+            # rows committed after the COUNT (a collector is running, max_id None) are not ours
+            for row in partition[: n - i]:
                 ids[i], start_ids[i], from_cross[i], to_cross[i], state_db_ids[i, 0], state_db_ids[i, 1] = (
                     row[:6]
                 )
@@ -161,13 +168,7 @@ def load_transitions(
             )
         ).all()
     p_by_id = {sid: parse_p_data(p) for sid, p in rows}
-    state_enc = np.empty((len(unique_states), len(VARIANTS), P_DATA_DIM), dtype=np.float32)
-    keys = []
-    for s, sid in enumerate(unique_states.tolist()):
-        p = p_by_id[sid]
-        keys.append(p.key)
-        for v in range(len(VARIANTS)):
-            state_enc[s, v] = encode_p_data(apply_variant_p_data(p, v))
+    state_enc = encode_states([p_by_id[sid] for sid in unique_states.tolist()])
     inverse = inverse.reshape(-1, 2)
     return TransitionData(
         transition_ids=ids,
@@ -178,8 +179,50 @@ def load_transitions(
         curves=torch.from_numpy(curves),
         from_state=torch.as_tensor(inverse[:, 0], dtype=torch.long),
         to_state=torch.as_tensor(inverse[:, 1], dtype=torch.long),
-        state_enc=torch.from_numpy(state_enc),
-        state_keys=keys,
+        state_enc=state_enc,
+        state_keys=[p_by_id[sid].key for sid in unique_states.tolist()],
+    )
+
+
+def encode_states(states: Sequence[PData]) -> torch.Tensor:
+    """(S, 4, P_DATA_DIM): every state encoded in the four symmetry variants."""
+    out = np.empty((len(states), len(VARIANTS), P_DATA_DIM), dtype=np.float32)
+    for s, p in enumerate(states):
+        for v in range(len(VARIANTS)):
+            out[s, v] = encode_p_data(apply_variant_p_data(p, v))
+    return torch.from_numpy(out)
+
+
+def transitions_from_samples(
+    points: npt.ArrayLike,
+    curves: npt.ArrayLike,
+    p_from: Sequence[PData],
+    p_to: Sequence[PData],
+    start_ids: npt.ArrayLike | None = None,
+) -> TransitionData:
+    """:class:`TransitionData` from in-memory samples (benchmarks, tests); ids are 0..N-1 by default."""
+    keys: dict[str, int] = {}
+    states: list[PData] = []
+    index = np.empty((len(p_from), 2), dtype=np.int64)
+    for i, pair in enumerate(zip(p_from, p_to, strict=True)):
+        for j, p in enumerate(pair):
+            if p.key not in keys:
+                keys[p.key] = len(states)
+                states.append(p)
+            index[i, j] = keys[p.key]
+    n = len(p_from)
+    ids = np.arange(n, dtype=np.int64)
+    return TransitionData(
+        transition_ids=ids,
+        start_ids=ids.copy() if start_ids is None else np.asarray(start_ids, dtype=np.int64),
+        from_cross=np.array([p.cross for p in p_from], dtype=np.int64),
+        to_cross=np.array([p.cross for p in p_to], dtype=np.int64),
+        points=torch.as_tensor(np.asarray(points), dtype=torch.float32),
+        curves=torch.as_tensor(np.asarray(curves), dtype=torch.float32),
+        from_state=torch.as_tensor(index[:, 0]),
+        to_state=torch.as_tensor(index[:, 1]),
+        state_enc=encode_states(states),
+        state_keys=[p.key for p in states],
     )
 
 

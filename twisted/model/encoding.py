@@ -17,6 +17,7 @@ displacement divided by the range half-width (0.5 m), so it lies in the disc of 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +52,8 @@ N_SEGMENTS = N_LINKS
 _PAIR_I, _PAIR_J = np.triu_indices(N_SEGMENTS, k=2)  # non-adjacent segment pairs, as in Top
 N_PAIRS = len(_PAIR_I)
 CROSSING_DIM = 2 * N_PAIRS  # per pair: crossed * (+1 if the earlier segment is over else -1), crossed * sign
-GEOMETRY_DIM = 3 * N_POINTS + CROSSING_DIM
+VISIT_GEOMETRY_DIM = 5 * MAX_VISITS  # per visit slot: present, arc position, x, y, over
+GEOMETRY_DIM = 3 * N_POINTS + CROSSING_DIM + VISIT_GEOMETRY_DIM
 
 XY_SCALE_M = 0.5 * N_LINKS * 0.04  # half the rope length: canonical points lie in about [-1, 1]
 Z_REST_M = 0.01  # a link lying on the table (its radius)
@@ -99,11 +101,15 @@ def _cross2(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def crossing_features(points: torch.Tensor) -> torch.Tensor:
-    """Per non-adjacent segment pair: who is over, and the sign, where the projections cross.
+def crossing_features(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Crossings of the projected rope, batched: per segment pair (B, CROSSING_DIM), per visit slot.
 
-    Same test as :func:`twisted.topology.top` (half-open segment parameters), batched in torch;
-    invariant to rotations/translations, so it can run on canonical points.
+    Same test as :func:`twisted.topology.top` (half-open segment parameters). Per non-adjacent
+    segment pair: crossed x (+1 if the earlier segment is over else -1), crossed x sign. Per visit
+    slot 1..12, the visits ordered along the rope as P-data numbers them: present, position along
+    the rope / 21, planar location, over (+1) / under (-1); this ties the P-data's visit numbers
+    to places on the rope. Rotation/translation invariant up to the location, so it runs on
+    canonical points.
     """
     start = points[:, :-1]
     d = points[:, 1:] - points[:, :-1]
@@ -122,10 +128,24 @@ def crossing_features(points: torch.Tensor) -> torch.Tensor:
     i_over = zi >= zj
     d_over = torch.where(i_over[..., None], di, dj)
     d_under = torch.where(i_over[..., None], dj, di)
-    sign = torch.where(_cross2(d_over, d_under) > 0, 1.0, -1.0)
+    sign = torch.where(_cross2(d_over, d_under) > 0, 1.0, -1.0).to(points.dtype)
     hit_f = hit.to(points.dtype)
     over_f = torch.where(i_over, 1.0, -1.0).to(points.dtype)
-    return torch.cat([hit_f * over_f, hit_f * sign.to(points.dtype)], dim=1)
+    pairs = torch.cat([hit_f * over_f, hit_f * sign], dim=1)
+
+    inf = torch.full_like(t, math.inf)
+    param = torch.cat([torch.where(hit, i + t, inf), torch.where(hit, j + u, inf)], dim=1)
+    order = param.argsort(dim=1)[:, :MAX_VISITS]
+    arc = param.gather(1, order)
+    present = torch.isfinite(arc)
+    loc = start[:, i, :2] + t[..., None] * di
+    loc2 = torch.cat([loc, loc], dim=1).gather(1, order[..., None].expand(-1, -1, 2))
+    over2 = torch.cat([over_f, -over_f], dim=1).gather(1, order)
+    p = present.to(points.dtype)
+    visits = torch.stack(
+        [p, torch.where(present, arc, 0.0) / N_LINKS, p * loc2[..., 0], p * loc2[..., 1], p * over2], dim=2
+    )
+    return pairs, visits.flatten(1)
 
 
 def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
@@ -141,7 +161,8 @@ def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
     cos, sin = torch.cos(angle), torch.sin(angle)
     xy = rotate(pts[:, :, :2] - centre[:, None], cos[:, None], -sin[:, None])
     canon = torch.cat([xy / XY_SCALE_M, (pts[:, :, 2:] - Z_REST_M) / Z_SCALE_M], dim=2)
-    features = torch.cat([canon.flatten(1), crossing_features(canon)], dim=1)
+    pairs, visits = crossing_features(canon)
+    features = torch.cat([canon.flatten(1), pairs, visits], dim=1)
     link_centres = 0.5 * (canon[:, 1:] + canon[:, :-1])
     return Preprocessed(features=features, link_centres=link_centres, centre=centre, cos=cos, sin=sin)
 

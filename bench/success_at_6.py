@@ -1,0 +1,88 @@
+"""success@6 of the inverse model on held-out transitions, per crossing step, next to 6 random curves.
+
+    python bench/success_at_6.py --db sqlite:///collect.db [--model-id N] [--per-step 60] [--workers 2]
+
+For every held-out transition (the validation side of the model's split, plus transitions newer
+than its data snapshot) 6 curves are sampled from the model for (q, next state) and 6 uniform
+random curves are drawn; each is simulated from q (SimPool); the transition is solved when any
+result has the next P-data. Prints the table and, with --json, writes the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from twisted.model.registry import load_model
+from twisted.model.success import held_out_transitions, success_at_k
+from twisted.sim.pool import SimPool
+from twisted.store import open_store
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--db", required=True, help="store with transitions (and the model, unless --default)")
+    ap.add_argument("--model-id", type=int, default=None, help="model id in the store (default: newest)")
+    ap.add_argument("--default", action="store_true", help="evaluate the shipped default model")
+    ap.add_argument("--per-step", type=int, default=60)
+    ap.add_argument("--k", type=int, default=6)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--steps", nargs="+", default=["0->1", "1->2", "2->3", "+2"])
+    ap.add_argument("--json", help="write the figures to this file")
+    args = ap.parse_args()
+
+    store = open_store(args.db)
+    model = load_model(None if args.default else store, args.model_id)
+    rng = np.random.default_rng(args.seed)
+    held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps)
+    meta = model.metadata
+    print(
+        f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
+        f"{meta.get('data_size')} transitions, val metrics {meta.get('metrics', {}).get('val_loss')}; "
+        f"{len(held)} held-out transitions from {args.db}"
+    )
+    t0 = time.perf_counter()
+    with SimPool(args.workers) as pool:
+        results = success_at_k(model, held, pool, rng, k=args.k)
+    wall = time.perf_counter() - t0
+    print(f"{'step':6s} {'n':>5s} {'model@' + str(args.k):>9s} {'random@' + str(args.k):>10s} {'ratio':>6s}")
+    rows = []
+    for step in args.steps:
+        r = results.get(step)
+        if r is None:
+            print(f"{step:6s} {0:5d} {'-':>9s} {'-':>10s} {'-':>6s}")
+            continue
+        ratio = r.model_rate / r.random_rate if r.solved_random else float("inf")
+        print(f"{step:6s} {r.n:5d} {r.model_rate:9.3f} {r.random_rate:10.3f} {ratio:6.2f}")
+        rows.append(
+            {
+                "step": step,
+                "n": r.n,
+                "model": r.model_rate,
+                "random": r.random_rate,
+                "solved_model": r.solved_model,
+                "solved_random": r.solved_random,
+            }
+        )
+    print(f"{2 * args.k * len(held)} simulations in {wall:.0f} s on {args.workers} workers")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(
+                {
+                    "db": args.db,
+                    "model_id": model.model_id,
+                    "k": args.k,
+                    "rows": rows,
+                    "metadata": {k: v for k, v in meta.items() if k != "parameters"},
+                },
+                fh,
+                indent=2,
+            )
+
+
+if __name__ == "__main__":
+    main()

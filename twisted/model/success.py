@@ -1,0 +1,149 @@
+"""success@k of the inverse model on held-out transitions, next to k random curves.
+
+For a held-out transition ``(q, s, c, q', s')`` the model samples ``k`` curves for ``(q, s')``;
+each is simulated from ``q`` and the transition counts as solved when any result has P-data
+``s'``. The same is done with ``k`` uniform random curves on the same transitions. Results are
+grouped by crossing step: ``0->1``, ``1->2``, ``2->3`` (and deeper ``+1`` steps) and ``+2``.
+
+Held-out means: the validation side of the model's own split (same seed and fraction, by start
+configuration) among the transitions it was trained on, plus every transition newer than its
+data snapshot; a model trained on another database (the shipped default) sees all of them as
+held out only if none of its start configurations are shared, which callers must judge.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from sqlalchemy import select
+
+from twisted.model.data import split_by_start
+from twisted.model.network import InverseModel
+from twisted.sim import Curve, sample_curve
+from twisted.sim.pool import SimPool
+from twisted.store.db import Store
+from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
+from twisted.topology import PData, parse_p_data
+
+__all__ = ["HeldOut", "StepResult", "held_out_transitions", "step_name", "success_at_k"]
+
+
+def step_name(from_cross: int, to_cross: int) -> str:
+    """``"0->1"`` style for +1 steps, ``"+2"`` for two crossings at once, ``"+3"``..."""
+    return f"{from_cross}->{to_cross}" if to_cross - from_cross == 1 else f"+{to_cross - from_cross}"
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """One held-out transition, ready to replay."""
+
+    transition_id: int
+    step: str
+    q: npt.NDArray[np.float64]
+    points: npt.NDArray[np.float64]
+    p_from: PData
+    p_to: PData
+
+
+def held_out_transitions(
+    store: Store,
+    model: InverseModel,
+    per_step: int,
+    rng: np.random.Generator,
+    steps: Sequence[str] = ("0->1", "1->2", "2->3", "+2"),
+    max_cross: int = 6,
+) -> list[HeldOut]:
+    """Up to ``per_step`` held-out transitions of each step kind, drawn uniformly (see module doc)."""
+    params = model.metadata.get("parameters", {})
+    max_id = model.metadata.get("max_transition_id")
+    with store.session() as session:
+        rows = session.execute(
+            select(
+                Transition.id, Transition.from_configuration_id, Transition.from_cross, Transition.to_cross
+            )
+            .where(Transition.to_cross > Transition.from_cross, Transition.to_cross <= max_cross)
+            .order_by(Transition.id)
+        ).all()
+    ids = np.array([r[0] for r in rows], dtype=np.int64)
+    starts = np.array([r[1] for r in rows], dtype=np.int64)
+    names = np.array([step_name(r[2], r[3]) for r in rows])
+    held = np.ones(len(ids), dtype=bool)
+    if max_id is not None and "seed" in params:
+        _, val = split_by_start(starts, float(params.get("val_fraction", 0.1)), int(params["seed"]))
+        in_snapshot = ids <= int(max_id)
+        held = ~in_snapshot
+        held[val] = True  # the model's validation side inside its snapshot
+    chosen: list[int] = []
+    for step in steps:
+        candidates = np.flatnonzero(held & (names == step))
+        if len(candidates) > per_step:
+            candidates = np.sort(rng.choice(candidates, per_step, replace=False))
+        chosen.extend(int(i) for i in candidates)
+    out = []
+    with store.session() as session:
+        for i in chosen:
+            t = session.get(Transition, int(ids[i]))
+            assert t is not None
+            c = session.get(Configuration, t.from_configuration_id)
+            assert c is not None
+            p_from = session.scalar(
+                select(TopologicalState.p_data).where(TopologicalState.id == t.from_state_id)
+            )
+            p_to = session.scalar(select(TopologicalState.p_data).where(TopologicalState.id == t.to_state_id))
+            out.append(
+                HeldOut(
+                    t.id, str(names[i]), c.q_array(), blob_to_array(c.points, (-1, 3)),
+                    parse_p_data(p_from), parse_p_data(p_to),
+                )
+            )  # fmt: skip
+    return out
+
+
+@dataclass
+class StepResult:
+    """success@k per step kind: ``solved_model`` / ``solved_random`` out of ``n``."""
+
+    step: str
+    n: int
+    solved_model: int
+    solved_random: int
+
+    @property
+    def model_rate(self) -> float:
+        return self.solved_model / self.n if self.n else float("nan")
+
+    @property
+    def random_rate(self) -> float:
+        return self.solved_random / self.n if self.n else float("nan")
+
+
+def success_at_k(
+    model: InverseModel,
+    transitions: Sequence[HeldOut],
+    pool: SimPool,
+    rng: np.random.Generator,
+    k: int = 6,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, StepResult]:
+    """Simulate ``k`` model curves and ``k`` random curves per transition; solved = any reaches ``p_to``."""
+    jobs: list[tuple[npt.NDArray[np.float64], Curve]] = []
+    for t in transitions:
+        jobs += [(t.q, c) for c in model.sample(t.points, t.q, t.p_to, k, rng, p_data=t.p_from)]
+        jobs += [(t.q, sample_curve(rng)) for _ in range(k)]
+    results = []
+    for i, r in enumerate(pool.imap(jobs)):
+        results.append(r)
+        if progress is not None and (i + 1) % k == 0:
+            progress(i + 1, len(jobs))
+    out: dict[str, StepResult] = {}
+    for n, t in enumerate(transitions):
+        block = results[2 * k * n : 2 * k * (n + 1)]
+        hit = [r.ok and r.p_data == t.p_to for r in block]
+        res = out.setdefault(t.step, StepResult(t.step, 0, 0, 0))
+        res.n += 1
+        res.solved_model += any(hit[:k])
+        res.solved_random += any(hit[k:])
+    return out
