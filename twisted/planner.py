@@ -649,19 +649,7 @@ def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROS
 
 def high_level(store: Any, goal: PData, limit: int) -> Callable[[PData], list[Any]]:
     """``s -> plans(s, goal)``, shortest first, through the store's plan cache."""
-    try:
-        from twisted.store.plans import cached_plans
-    except ImportError:  # TEMPORARY until the plan cache lands: the BFS itself, memoised in memory
-        from twisted.moves import plans
-
-        memo: dict[str, list[Any]] = {}
-
-        def plans_from(start: PData) -> list[Any]:
-            if start.key not in memo:
-                memo[start.key] = plans(start, goal, limit)
-            return memo[start.key]
-
-        return plans_from
+    from twisted.store.plans import cached_plans
 
     def plans_from(start: PData) -> list[Any]:
         return list(cached_plans(store, start, goal, limit))
