@@ -4,9 +4,9 @@
 (``postgres_admin_url``; skipped otherwise). A test that takes ``db_url`` therefore runs once per backend;
 ``sqlite_url`` is for tests of SQLite-only behaviour (files, WAL, foreign files).
 
-To run the PostgreSQL variants, either set ``TWISTED_TEST_POSTGRES_URL`` to a server URL whose user may
-CREATE DATABASE (e.g. ``postgresql+psycopg://postgres@localhost/postgres``), or override the
-``postgres_admin_url`` fixture (e.g. with one that starts a throwaway cluster).
+The PostgreSQL variants use the server at ``TWISTED_TEST_POSTGRES_URL`` (a URL whose user may CREATE
+DATABASE, e.g. ``postgresql+psycopg://postgres@localhost/postgres``) when it is set, otherwise a throwaway
+cluster that ``postgres_admin_url`` starts itself (``tests/postgres_server.py``).
 """
 
 from __future__ import annotations
@@ -27,12 +27,25 @@ def sqlite_url(tmp_path) -> str:
 
 
 @pytest.fixture(scope="session")
-def postgres_admin_url() -> str:
-    """URL of a PostgreSQL database on a server where test databases may be created; skips if none."""
+def postgres_admin_url() -> Iterator[str]:
+    """URL of a PostgreSQL database on a server where test databases may be created.
+
+    ``TWISTED_TEST_POSTGRES_URL`` if set; otherwise a throwaway cluster started for the session
+    (``tests/postgres_server.py``: initdb + pg_ctl on 127.0.0.1 in a temporary directory, removed at
+    the end). Skips only when no PostgreSQL server binaries are installed.
+    """
     url = os.environ.get("TWISTED_TEST_POSTGRES_URL")
-    if not url:
-        pytest.skip("no PostgreSQL server (set TWISTED_TEST_POSTGRES_URL to run the PostgreSQL variants)")
-    return url
+    if url:
+        yield url
+        return
+    from tests.postgres_server import PostgresServer, PostgresUnavailable
+
+    try:
+        server = PostgresServer()
+    except PostgresUnavailable as exc:
+        pytest.skip(str(exc))
+    with server:
+        yield server.url
 
 
 @pytest.fixture
