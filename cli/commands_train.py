@@ -33,6 +33,12 @@ def train_command(
     components: int = typer.Option(4, "--components", min=1, help="Gaussians per continuous head."),
     val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
+    threads: int | None = typer.Option(
+        None,
+        "--threads",
+        min=1,
+        help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
+    ),
     checkpoint_every_s: float = typer.Option(
         30.0, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
     ),
@@ -50,6 +56,8 @@ def train_command(
         fail(f"--device must be cpu or cuda, got {device!r}")
     if device.startswith("cuda") and not torch.cuda.is_available():
         fail("--device cuda: no CUDA device is available to torch here; use --device cpu")
+    if threads is not None:
+        torch.set_num_threads(threads)
     config = TrainConfig(
         epochs=epochs,
         hours=hours,

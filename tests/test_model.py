@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -36,6 +37,15 @@ from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, RopeSim, sample_c
 from twisted.topology import EMPTY, PData, top
 
 SMALL = NetConfig(hidden=32, layers=2, head_hidden=16, components=3)
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    """Tiny batches: one thread is faster, and far faster on a shared, busy machine."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 def random_rope(seed: int, bend: float = 0.5) -> np.ndarray:
