@@ -46,7 +46,9 @@ def collect_command(
     ),
     max_cross: int = typer.Option(6, "--max-cross", help="Keep transitions up to this many crossings."),
     cross_bias: float = typer.Option(
-        2.0, "--cross-bias", help="D_Q bias: a start crossing count c is picked with weight cross_bias**c."
+        1.0,
+        "--cross-bias",
+        help="D_Q bias: start crossing count c weighs (1+c)**bias (0: uniform over counts).",
     ),
     max_kept: int | None = typer.Option(
         None, "--max-kept", help="Also stop after this many kept transitions."

@@ -176,6 +176,7 @@ def test_options_are_validated() -> None:
         CollectOptions(hours=1, workers=0),
         CollectOptions(hours=1, max_cross=0),
         CollectOptions(hours=1, cross_bias=float("nan")),
+        CollectOptions(hours=1, cross_bias=-1),
         CollectOptions(hours=1, max_kept=0),
     ):
         with pytest.raises(CollectError):
@@ -183,16 +184,20 @@ def test_options_are_validated() -> None:
 
 
 def test_dq_sampling_is_biased_toward_more_crossings() -> None:
-    dq = DQIndex(max_cross=3, cross_bias=2.0)
+    dq = DQIndex(max_cross=3, cross_bias=1.0)
     dq.add(np.arange(1, 8), np.array([0, 1, 1, 2, 2, 2, 3]))
-    assert dq.cross_probabilities() == pytest.approx({0: 1 / 7, 1: 2 / 7, 2: 4 / 7})  # cross 3 = max: never
+    # weights 1+c for the counts present below max_cross (3 crossings cannot rise and stay <= 3)
+    assert dq.cross_probabilities() == pytest.approx({0: 1 / 6, 1: 2 / 6, 2: 3 / 6})
     rng = np.random.default_rng(0)
-    draws = np.array([dq.sample(rng) for _ in range(7000)])
+    draws = np.array([dq.sample(rng) for _ in range(6000)])
     assert 7 not in draws
     share = {c: np.isin(draws, ids).mean() for c, ids in dq.by_cross.items()}
-    assert share == pytest.approx({0: 1 / 7, 1: 2 / 7, 2: 4 / 7}, abs=0.03)
+    assert share == pytest.approx({0: 1 / 6, 1: 2 / 6, 2: 3 / 6}, abs=0.03)
     # uniform inside a crossing count
     assert np.mean(draws == 2) == pytest.approx(np.mean(draws == 3), abs=0.03)
+    uniform = DQIndex(max_cross=3, cross_bias=0.0)
+    uniform.add(np.arange(1, 8), np.array([0, 1, 1, 2, 2, 2, 3]))
+    assert uniform.cross_probabilities() == pytest.approx({0: 1 / 3, 1: 1 / 3, 2: 1 / 3})
 
 
 # --- collecting ---------------------------------------------------------------------------------------
