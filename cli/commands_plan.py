@@ -38,8 +38,12 @@ def _sampler(store: Any, planner: str, model_id: int | None) -> tuple[Any, int |
 
     if planner != "twisted":
         return None, None
+    import torch
+
     from twisted.model.registry import ModelError, load_model
 
+    # the simulator workers own the cores; a second torch thread on a busy machine only slows sampling
+    torch.set_num_threads(1)
     try:
         model = load_model(store, model_id)
     except ModelError as exc:
@@ -61,7 +65,7 @@ def _options(
     """PlannerOptions from the command line, over the stored ones of a resumed run (which must agree)."""
     from twisted.planner import PlannerOptions
 
-    given = {
+    given: dict[str, Any] = {
         "planner": planner,
         "heuristic": heuristic,
         "seed": seed,

@@ -378,9 +378,8 @@ class Twisted:
             iteration=self.iteration,
             elapsed_s=self.elapsed_s,
             sim_calls=self.sim_calls,
-            rng_state=self.rng.bit_generator.state,
-            stats={"state": {k: list(v) for k, v in self.stats["state"].items()},
-                   "plan": {k: list(v) for k, v in self.stats["plan"].items()}},
+            rng_state=dict(self.rng.bit_generator.state),
+            stats={table: {k: list(v) for k, v in entries.items()} for table, entries in self.stats.items()},
         )
 
     def _save(self, upto: int, checkpoint: Checkpoint) -> None:
@@ -709,7 +708,7 @@ def start_search(
     tree = SearchTree()
     tree.add(root)
     rng = np.random.default_rng(options.seed)
-    first = Checkpoint(0, 0.0, 0, rng.bit_generator.state, {"state": {}, "plan": {}})
+    first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
     parameters = {**options.to_dict(), **(extra_parameters or {})}
     recorder = SearchRun.create(store, goal, parameters, root, first, start_configuration_id)
     return Twisted(
@@ -840,7 +839,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult
         curve = Curve(*node.curve)
         result = simulate(sim, state, curve)
         steps.append(ReplayStep(curve, node.p_data, result.p_data if result.ok else None, result.reason))
-        if not result.ok:
+        if result.state is None:
             break
         state = result.state
     return ReplayResult(run_id, info.goal, steps)

@@ -381,7 +381,9 @@ def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[Stor
     out = []
     for row, key in session.execute(query):
         seq_of[row.id] = row.seq
-        curve = None if row.link is None else (row.link, row.z_max_m, row.x_m, row.y_m)
+        curve = None
+        if row.link is not None:  # the curve columns are NULL together (root) or set together
+            curve = (row.link, float(row.z_max_m or 0.0), float(row.x_m or 0.0), float(row.y_m or 0.0))
         out.append(
             StoredNode(
                 id=row.id,
