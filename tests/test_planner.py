@@ -164,19 +164,20 @@ def _tree_signature(store, run_id: int) -> list[tuple]:  # type: ignore[no-untyp
     return [(n.seq, n.parent_seq, n.p_data.key, n.curve, n.iteration, n.sim_call) for n in info.nodes]
 
 
-def test_stop_and_resume_gives_the_same_tree_as_one_run(tmp_path: Path) -> None:
+def test_stop_and_resume_gives_the_same_tree_as_one_run(db_url: str) -> None:
+    """On SQLite and PostgreSQL: the RNG state, statistics and tree survive the store bit for bit."""
     goal = check_goal(THREE_CROSSINGS)
     options = PlannerOptions(planner="random-low", seed=11, k=3, p_expand=0.3, k_expand=5)
-    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+    with open_store(db_url) as store, SimPool(1) as pool:
         whole = start_search(store, goal, options, pool)
-        assert whole.run(max_iterations=8).status == "stopped"
+        assert whole.run(max_iterations=6).status == "stopped"
         first = start_search(store, goal, options, pool)
-        half = first.run(max_iterations=4)
-        assert half.status == "stopped" and half.iterations == 4
+        half = first.run(max_iterations=3)
+        assert half.status == "stopped" and half.iterations == 3
         resumed = resume_search(store, first.run_id, pool)
-        assert resumed.iteration == 4 and resumed.elapsed_before_s == pytest.approx(half.elapsed_s)
-        rest = resumed.run(max_iterations=8)
-        assert rest.run_id == first.run_id and rest.iterations == 8
+        assert resumed.iteration == 3 and resumed.elapsed_before_s == pytest.approx(half.elapsed_s)
+        rest = resumed.run(max_iterations=6)
+        assert rest.run_id == first.run_id and rest.iterations == 6
         assert rest.sim_calls == whole.sim_calls
         assert rest.elapsed_s > half.elapsed_s
         a, b = _tree_signature(store, whole.run_id), _tree_signature(store, first.run_id)
@@ -327,3 +328,37 @@ def test_resume_refuses_changed_search_options(tmp_path: Path) -> None:
     assert code == 2 and "heuristic" in out
     code, out = _plan(db, "--resume", str(run_id), "--goal", ONE_CROSSING, "--timeout", "5")
     assert code == 2 and "goal" in out
+
+
+def test_unknown_heuristic_or_planner_exit_2(tmp_path: Path) -> None:
+    db = _db(tmp_path)
+    code, out = _plan(db, "--goal", ONE_CROSSING, "--heuristic", "greedy", "--timeout", "1")
+    assert code == 2 and "heuristic" in out
+    code, out = _plan(db, "--goal", ONE_CROSSING, "--planner", "magic", "--timeout", "1")
+    assert code == 2 and "planner" in out
+
+
+def test_start_config_is_the_root_of_the_tree(tmp_path: Path) -> None:
+    from twisted.sim import Curve, RopeSim
+    from twisted.sim.pool import simulate
+    from twisted.store.queries import add_configuration
+
+    db = _db(tmp_path)
+    sim = RopeSim()
+    sim.reset()
+    moved = simulate(sim, sim.state(), Curve(3, 0.02, 0.1, 0.2))
+    assert moved.ok and moved.state is not None and moved.p_data is not None
+    with open_store(db) as store:
+        with store.session(write=True) as session:
+            config_id = add_configuration(
+                session, run_id=None, p_data=moved.p_data, q=moved.state, points=moved.points
+            ).id
+    assert _plan(db, "--goal", ONE_CROSSING, "--start-config", str(config_id + 1), "--timeout", "1",
+                 "--planner", "random-low")[0] == 2
+    code, out = _plan(db, "--goal", ONE_CROSSING, "--start-config", str(config_id), "--planner", "random-low",
+                      "--workers", "1", "--max-iterations", "1", "--p-expand", "0", "--json")
+    assert code in (0, 3), out
+    with open_store(db) as store:
+        info = load_run(store, json.loads(out)["run_id"])
+        assert info is not None and info.start_configuration_id == config_id
+        assert np.array_equal(info.nodes[0].q, moved.state)
