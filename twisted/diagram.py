@@ -135,7 +135,7 @@ def _cw_next_tables(p: PData) -> list[int]:
     return cw_next
 
 
-@lru_cache(maxsize=65536)
+@lru_cache(maxsize=4096)
 def diagram(p: PData) -> Diagram:
     """Build the planar diagram of ``p`` and trace its faces.
 

@@ -25,9 +25,14 @@ segment side, e.g. a hairpin folded from one straight piece), and for a segment 
 one face (an end segment, or a bridge) its left with its right side, in both assignments.
 The reference also demanded that both rope ends lie in one face. We do not: a face is a disc on
 the sphere, so a path from one side to the other always exists inside it and the rope ends have
-no say (see ``test_r2_needs_no_common_face_for_the_rope_ends``). From the empty rope this gives
-8 R2 moves where the reference had 4: it allowed only the hairpin (sa == sb); the 4 "parallel"
-ones (an S-shape pushed together around a rope end) are R2 moves of the topology as well.
+no say (see ``test_r2_needs_no_common_face_for_the_rope_ends``). A piece pushed over another piece
+of the same segment (a == b) is physical for an open rope: fold a straight piece into a hairpin, or
+into an S around a rope tip, and push one part across the other; from the empty rope every R2 is
+of this kind. That gives 8 R2 moves from the empty rope where the reference had 4 (presumably the
+4 hairpins, sa == sb); the 4 "parallel" ones (``test_r2_parallel_pieces_the_reference_did_not_have``)
+are drawn and read back by Top in the tests. From a 1-crossing curl we list 60 moves giving 52
+states (reference: 40 / 36), itemised in ``test_successor_counts_from_empty_and_one_crossing``;
+the enumeration counts agree all the same, because they are the counts of all planar P-data.
 
 Cross(end segment e, segment b, side sb, over/under). The rope tip of the end segment e moves
 across segment b, a segment of the face that e lies in, coming from b's side sb. The new visit on
@@ -290,7 +295,9 @@ def _cross_moves(p: PData, d: Diagram) -> Iterator[Successor]:
                 yield Successor(_insert(p, inserts), move)
 
 
-@lru_cache(maxsize=4096)
+# A cached list is ~70 KiB for a 4-crossing state; 1024 of them cover the states one BFS expands
+# (at most 2^Cross(goal)) many times over while keeping the memory of a planner worker bounded.
+@lru_cache(maxsize=1024)
 def _successors(p: PData) -> tuple[Successor, ...]:
     d = diagram(p)
     return (*_r1_moves(p), *_r2_moves(p, d), *_cross_moves(p, d))
