@@ -56,7 +56,11 @@ def main() -> None:
         if r is None:
             print(f"{step:6s} {0:5d} {'-':>9s} {'-':>10s} {'-':>6s}")
             continue
-        ratio = r.model_rate / r.random_rate if r.solved_random else float("inf")
+        ratio = (
+            r.model_rate / r.random_rate
+            if r.solved_random
+            else (float("inf") if r.solved_model else float("nan"))
+        )
         print(f"{step:6s} {r.n:5d} {r.model_rate:9.3f} {r.random_rate:10.3f} {ratio:6.2f}")
         rows.append(
             {

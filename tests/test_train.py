@@ -13,8 +13,9 @@ from typer.testing import CliRunner
 from cli.main import app
 from tests.test_model import SMALL, random_rope
 from twisted.model.data import NoTrainingDataError, load_transitions, split_by_start
-from twisted.model.network import InverseModel
+from twisted.model.network import InverseModel, InverseNet
 from twisted.model.registry import ModelError, default_model_path, list_models, load_model
+from twisted.model.success import held_out_transitions, step_name
 from twisted.model.train import TrainConfig, train
 from twisted.sim import sample_curve
 from twisted.store import Configuration, Transition, open_store
@@ -215,3 +216,35 @@ def test_cli_train_then_models(small_store: tuple[str, dict[str, int]]) -> None:
     assert "run-1" in result.output
     result = runner.invoke(app, ["--db", url, "train", "--resume"])
     assert result.exit_code == 2 and "no unfinished training run" in result.output
+
+
+def test_held_out_transitions_are_the_validation_side_and_newer_ones(tmp_path) -> None:
+    url = f"sqlite:///{tmp_path / 'h.db'}"
+    fill_store(url, 150, seed=2)
+    store = open_store(url)
+    data = load_transitions(store)
+    cut = int(data.transition_ids[99])
+    config = TrainConfig(epochs=1, **FAST)
+    # a model whose data snapshot ends at `cut`: every later transition is held out
+    model = InverseModel(
+        InverseNet(SMALL), metadata={"max_transition_id": cut, "parameters": config.to_dict()}
+    )
+    steps = ("0->1", "1->2", "2->3", "+2")
+    held = held_out_transitions(store, model, per_step=1000, rng=np.random.default_rng(0), steps=steps)
+    snapshot = data.transition_ids <= cut
+    train_idx, _ = split_by_start(data.start_ids[snapshot], config.val_fraction, config.seed)
+    train_starts = set(data.start_ids[snapshot][train_idx])
+    names = np.array([step_name(a, b) for a, b in zip(data.from_cross, data.to_cross, strict=True)])
+    expected = {
+        int(t)
+        for t, start, name, new in zip(data.transition_ids, data.start_ids, names, ~snapshot, strict=True)
+        if name in steps and (new or start not in train_starts)
+    }
+    assert {h.transition_id for h in held} == expected
+    assert any(h.transition_id > cut for h in held) and any(h.transition_id <= cut for h in held)
+    by_id = dict(zip(data.transition_ids.tolist(), names, strict=True))
+    for h in held:
+        assert h.step == by_id[h.transition_id]
+        assert h.points.shape == (22, 3) and h.p_to.cross > h.p_from.cross
+    few = held_out_transitions(store, model, per_step=2, rng=np.random.default_rng(0), steps=steps)
+    assert len(few) <= 2 * len(steps)

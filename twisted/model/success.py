@@ -89,16 +89,12 @@ def held_out_transitions(
             assert t is not None
             c = session.get(Configuration, t.from_configuration_id)
             assert c is not None
-            p_from = session.scalar(
-                select(TopologicalState.p_data).where(TopologicalState.id == t.from_state_id)
-            )
-            p_to = session.scalar(select(TopologicalState.p_data).where(TopologicalState.id == t.to_state_id))
+            p_from = session.get_one(TopologicalState, t.from_state_id).p_data
+            p_to = session.get_one(TopologicalState, t.to_state_id).p_data
+            points = blob_to_array(c.points, (-1, 3))
             out.append(
-                HeldOut(
-                    t.id, str(names[i]), c.q_array(), blob_to_array(c.points, (-1, 3)),
-                    parse_p_data(p_from), parse_p_data(p_to),
-                )
-            )  # fmt: skip
+                HeldOut(t.id, str(names[i]), c.q_array(), points, parse_p_data(p_from), parse_p_data(p_to))
+            )
     return out
 
 
