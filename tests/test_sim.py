@@ -19,7 +19,7 @@ from twisted.sim import (
     sample_curve,
     simulate,
 )
-from twisted.sim.rope import LINK_RADIUS_M
+from twisted.sim.rope import LINK_RADIUS_M, MIN_LIFT_M, RELEASE_HEIGHT_M
 from twisted.topology import EMPTY, parse_p_data
 
 # Two hand-designed curves: pull the middle link sideways (a V with both arms ending near y=0),
@@ -103,6 +103,31 @@ def test_head_carried_over_the_rope_makes_one_crossing(sim: RopeSim, v_state: np
     z = sim.link_points()[:, 2]
     assert z.max() == pytest.approx(3 * LINK_RADIUS_M, abs=0.004)
     assert sim.data.contact.dist[: sim.data.ncon].min() > -LINK_RADIUS_M / 2
+
+
+def test_gripper_path_lifts_carries_and_lowers(sim: RopeSim) -> None:
+    sim.reset()
+    start = sim.data.body("link_4").xpos.copy()
+    for z_max in (0.0, 0.05):
+        path = sim.gripper_path(Curve(4, z_max, 0.3, -0.2))
+        np.testing.assert_allclose(path[-1, :2], start[:2] + [0.3, -0.2], atol=1e-12)
+        assert path[-1, 2] == pytest.approx(RELEASE_HEIGHT_M)
+        assert np.linalg.norm(path[0] - start) < 1e-3  # starts where the link lies
+        # z_max = 0 still lifts the link off the table by MIN_LIFT_M (above the straight line down)
+        assert path[:, 2].max() >= start[2] + z_max + MIN_LIFT_M - 1e-4
+        speed = np.linalg.norm(np.diff(path, axis=0), axis=1) / sim.model.opt.timestep
+        assert 0.2 < np.mean(speed) < 0.4 and speed.max() < 0.8  # about 0.3 m/s, smooth
+
+
+def test_grasp_welds_exactly_one_link(sim: RopeSim) -> None:
+    sim.reset()
+    sim.grasp(7)
+    assert sim.data.eq_active.tolist() == [int(i == 7) for i in range(N_LINKS)]
+    np.testing.assert_array_equal(sim.data.mocap_pos[0], sim.data.body("link_7").xpos)
+    sim.grasp(3)
+    assert sim.data.eq_active.tolist() == [int(i == 3) for i in range(N_LINKS)]
+    sim.release()
+    assert not sim.data.eq_active.any()
 
 
 def test_friction_scale_scales_every_geom_friction() -> None:

@@ -256,67 +256,88 @@ class RopeSim:
         path[:, 2] = start[2] + (RELEASE_HEIGHT_M - start[2]) * s + lift * np.sin(np.pi * s)
         return path
 
+    def grasp(self, link: int) -> None:
+        """Put the gripper exactly on ``link`` and weld it there (its weld relpose is the identity)."""
+        d, body = self.data, self._link_body[link]
+        d.mocap_pos[self._gripper] = d.xpos[body]
+        d.mocap_quat[self._gripper] = d.xquat[body]
+        d.eq_active[self._weld] = 0
+        d.eq_active[self._weld[link]] = 1
+
+    def release(self) -> None:
+        """Open the gripper: no link is welded any more."""
+        self.data.eq_active[self._weld] = 0
+
     def apply(self, curve: Curve) -> CurveOutcome:
         """Simulate one curve from the current state; deterministic given ``state()`` and ``curve``.
 
         On ``ok=False`` the rope is left in an invalid configuration: restore a state before reuse.
         """
-        m, d = self.model, self.data
-        self.set_state(self.state())
+        self.set_state(self.state())  # resets everything but q: the result depends on q alone
         reason = self.invalid_reason()
         if reason is not None:
             return CurveOutcome(False, f"invalid start state: {reason}", 0)
-
-        link = curve.link
-        body = self._link_body[link]
         path = self.gripper_path(curve)
         reach = float(np.hypot(*path[-1, :2]))
         if reach > WORKSPACE_RADIUS_M:
             # the grasped link would end there: the rope leaves for sure, so do not simulate it
             return CurveOutcome(False, f"curve target is outside the workspace ({reach:.2f} m out)", 0)
-        d.mocap_pos[self._gripper] = d.xpos[body]
-        d.mocap_quat[self._gripper] = d.xquat[body]
-        d.eq_active[self._weld[link]] = 1
+        self.grasp(curve.link)
+        reason, carry_steps = self._carry(curve.link, path)
+        self.release()
+        if reason is not None:
+            return CurveOutcome(False, reason, carry_steps)
+        reason, settle_steps = self._settle()
+        steps = carry_steps + settle_steps
+        if reason is not None:
+            return CurveOutcome(False, reason, steps)
+        mujoco.mj_forward(self.model, self.data)  # kinematics of the final state for link_points()
+        reason = self.invalid_reason()
+        return CurveOutcome(reason is None, reason, steps)
+
+    def _carry(self, link: int, path: FloatArray) -> tuple[str | None, int]:
+        """Move the gripper along ``path``, one point per step; (reason to stop or None, steps).
+
+        Stops early, to release there, when the grasped link comes down onto another strand: the
+        link is let go on top of it rather than pressed through it into the table.
+        """
+        d = self.data
         grasped_geom = self._link_geom[link]
-        landing_from = len(path) // 2  # only the descending half may land on a strand
+        landing_from = len(path) // 2  # only the descending half of the arc may land
         window = self._window_steps
         steps = 0
-
         for k, target in enumerate(path):
             d.mocap_pos[self._gripper] = target
             steps += 1
             if (reason := self._step()) is not None:
-                return CurveOutcome(False, reason, steps)
+                return reason, steps
             if steps % window == 0 and (reason := self.invalid_reason()) is not None:
-                return CurveOutcome(False, reason, steps)
+                return reason, steps
             if k >= landing_from and self._lands_on_strand(grasped_geom, link):
-                break  # let go on top of the strand rather than press it into the table
-        d.eq_active[self._weld[link]] = 0
+                break
+        return None, steps
 
-        # Settle: every link slower than SETTLE_SPEED over two consecutive windows.
+    def _settle(self) -> tuple[str | None, int]:
+        """Step until every link is slower than SETTLE_SPEED over two consecutive windows."""
+        window = self._window_steps
+        window_s = window * self.model.opt.timestep
         last = self.link_positions()
-        quiet = 0
-        max_move = SETTLE_SPEED_M_S * window * m.opt.timestep
-        for _ in range(0, self._settle_cap_steps, window):
+        quiet, steps, moved = 0, 0, 0.0
+        while steps < self._settle_cap_steps:
             for _ in range(window):
                 steps += 1
                 if (reason := self._step()) is not None:
-                    return CurveOutcome(False, reason, steps)
+                    return reason, steps
             if (reason := self.invalid_reason()) is not None:
-                return CurveOutcome(False, reason, steps)
+                return reason, steps
             now = self.link_positions()
             moved = float(np.max(np.linalg.norm(now - last, axis=1)))
             last = now
-            quiet = quiet + 1 if moved < max_move else 0
+            quiet = quiet + 1 if moved < SETTLE_SPEED_M_S * window_s else 0
             if quiet >= 2:
-                break
-        else:
-            speed = moved / (window * m.opt.timestep)
-            reason = f"rope did not settle within {SETTLE_CAP_S} s (a link still moves at {speed:.3f} m/s)"
-            return CurveOutcome(False, reason, steps)
-        mujoco.mj_forward(m, d)  # kinematics of the final state for link_points()
-        reason = self.invalid_reason()
-        return CurveOutcome(reason is None, reason, steps)
+                return None, steps
+        speed = moved / window_s
+        return f"rope did not settle within {SETTLE_CAP_S} s (a link still moves at {speed:.3f} m/s)", steps
 
     def _step(self) -> str | None:
         """One time step; the reason to stop when two geoms sink deeper than a radius into each other.
