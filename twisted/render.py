@@ -276,8 +276,16 @@ def figure_to_array(fig: Figure, dpi: int = 100) -> npt.NDArray[np.uint8]:
     return np.asarray(Image.open(buf).convert("RGB"))
 
 
-def save_gif(frames: Sequence[npt.NDArray[np.uint8]], path: str | Path, frame_s: float = 0.5) -> Path:
-    """Write RGB frames as an animated GIF (looping); frames are padded to a common size."""
+def save_gif(
+    frames: Sequence[npt.NDArray[np.uint8]],
+    path: str | Path,
+    frame_s: float = 0.5,
+    last_frame_s: float | None = None,
+) -> Path:
+    """Write RGB frames as an animated GIF (looping); frames are padded to a common size.
+
+    ``last_frame_s`` holds the final frame longer (a replay should rest on its result).
+    """
     from PIL import Image
 
     if not frames:
@@ -289,10 +297,18 @@ def save_gif(frames: Sequence[npt.NDArray[np.uint8]], path: str | Path, frame_s:
         canvas = np.full((h, w, 3), 255, dtype=np.uint8)
         canvas[: f.shape[0], : f.shape[1]] = f[..., :3]
         images.append(Image.fromarray(canvas))
+    durations = [int(frame_s * 1000)] * len(images)
+    if last_frame_s is not None:
+        durations[-1] = int(last_frame_s * 1000)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(
-        out, save_all=True, append_images=images[1:], duration=int(frame_s * 1000), loop=0, optimize=False
+        out,
+        save_all=True,
+        append_images=images[1:],
+        duration=durations,
+        loop=0,
+        optimize=False,
     )
     return out
 
@@ -455,8 +471,7 @@ def render_run(
     files = [save_png(frame(n_steps), out_png)]
     if out_gif is not None:
         frames = [figure_to_array(frame(i), dpi=80) for i in range(len(path))]
-        frames.append(frames[-1])  # hold the final state a little longer
-        files.append(save_gif(frames, out_gif, frame_s=1.0))
+        files.append(save_gif(frames, out_gif, frame_s=1.0, last_frame_s=3.0))
     return Rendered(files, backend if images is not None else f"matplotlib ({backend})")
 
 
