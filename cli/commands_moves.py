@@ -9,7 +9,6 @@ import json
 from typing import TYPE_CHECKING, NoReturn
 
 import typer
-from rich.markup import escape
 
 from cli.app import EXIT_BAD_INPUT, EXIT_NOT_REACHED, app, db_url, err_console, fail
 
@@ -26,8 +25,7 @@ MAX_ENUMERATE_CROSSES = 5  # 4 takes about a second; 5 about half a minute and ~
 
 
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
-    # P-data messages are full of [...] that rich would take for markup
-    fail(escape(message), code)
+    fail(message, code)  # fail() escapes rich markup (P-data messages are full of [...])
 
 
 def _state(text: str, option: str) -> PData:
