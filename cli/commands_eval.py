@@ -147,6 +147,7 @@ def _eval(
     friction_scale: float,
     parallel: int,
     options: dict[str, Any],
+    label: str | None,
 ) -> Any:
     from twisted.evaluate import EvalInputError, run_eval
 
@@ -183,6 +184,7 @@ def _eval(
                 workers=workers,
                 parallel=parallel,
                 options=options,
+                label=label,
                 on_start=on_start,
                 on_outcome=on_outcome,
             )
@@ -196,9 +198,10 @@ def _eval(
     counts: dict[str, int] = {}
     for o in summary.outcomes:
         counts[o.status] = counts.get(o.status, 0) + 1
+    ran = ", ".join(f"{n} {s}" for s, n in sorted(counts.items())) or "nothing left to run"
     console.print(
-        f"eval run {summary.eval_run_id}: {summary.total} goal x seed, {summary.already_done} done before, "
-        + ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+        f"eval run {summary.eval_run_id} ({summary.planner}): {summary.total} goal x seed, "
+        f"{summary.already_done} finished before; this time: {ran}"
     )
     return summary
 
@@ -254,6 +257,9 @@ def eval_command(
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
     heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
     model_id: int = typer.Option(None, "--model", help="Inverse model id for `twisted` (default: newest)."),
+    label: str = typer.Option(
+        None, "--label", help="Name the results are stored under (default: planner[-heuristic])."
+    ),
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
     parallel = parallel or _default_parallel()
@@ -267,6 +273,7 @@ def eval_command(
         friction_scale,
         parallel,
         _planner_options(heuristic, model_id),
+        label,
     )
 
 
@@ -304,6 +311,7 @@ def sensitivity_run(
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
     heuristic: str = typer.Option(None, "--heuristic"),
     model_id: int = typer.Option(None, "--model"),
+    label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
     parallel = parallel or _default_parallel()
@@ -319,6 +327,7 @@ def sensitivity_run(
             scale,
             parallel,
             options,
+            label,
         )
 
 

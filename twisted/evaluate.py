@@ -346,7 +346,8 @@ class EvalTask:
     set_id: int
     problem_id: int
     goal_key: str
-    planner: str
+    planner: str  # the planner kind (twisted, random-low, low-level-only)
+    label: str  # what the results are stored under (eval_results.planner), e.g. "twisted-rnd"
     seed: int
     timeout_s: float
     friction_scale: float
@@ -386,7 +387,7 @@ class EvalSummary:
 def _result_key(task: EvalTask) -> Any:
     return (
         (EvalResult.set_id == task.set_id)
-        & (EvalResult.planner == task.planner)
+        & (EvalResult.planner == task.label)
         & (EvalResult.goal_key == task.goal_key)
         & (EvalResult.seed == task.seed)
         & (EvalResult.timeout_s == task.timeout_s)
@@ -413,7 +414,7 @@ def _claim(store: Any, task: EvalTask) -> tuple[int, int | None] | None:
                 eval_run_id=task.eval_run_id,
                 set_id=task.set_id,
                 problem_id=task.problem_id,
-                planner=task.planner,
+                planner=task.label,
                 goal_key=task.goal_key,
                 seed=task.seed,
                 timeout_s=task.timeout_s,
@@ -436,17 +437,18 @@ def _set_row(store: Any, row_id: int, **values: Any) -> None:
         session.execute(update(EvalResult).where(EvalResult.id == row_id).values(**values))
 
 
-def _sampler(store: Any, planner: str, options: Mapping[str, Any]) -> Any:
-    """The curve sampler of a planner kind: the inverse model for ``twisted``, else random curves."""
+def _sampler(store: Any, planner: str, model_id: int | None) -> tuple[Any, int | None]:
+    """The curve sampler of a planner kind (the inverse model for ``twisted``) and the model's id."""
     if planner != "twisted":
-        return None
+        return None, None
     import torch
 
     from twisted.model.registry import load_model
     from twisted.planner import ModelCurves
 
     torch.set_num_threads(1)  # one core per planner: parallel evaluations share the machine
-    return ModelCurves(load_model(store, options.get("model_id")))
+    model = load_model(store, model_id)
+    return ModelCurves(model), model.model_id
 
 
 def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
@@ -468,16 +470,26 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         options = PlannerOptions(**{**option_fields, "planner": task.planner, "seed": task.seed})
         stop = StopSignals()
         with stop.installed(), SimPool(task.workers, task.friction_scale) as pool:
-            sampler = _sampler(store, task.planner, task.options)
             search = None
             if resume_run_id is not None:
                 from twisted.store.search import load_run
 
                 info = load_run(store, resume_run_id, with_nodes=False)
                 if info is not None and info.outcome != "solved" and info.checkpoint is not None:
+                    # continue with the model the run started with
+                    sampler, _ = _sampler(store, task.planner, info.parameters.get("model_id"))
                     search = resume_search(store, resume_run_id, pool, sampler=sampler, stop=stop)
             if search is None:
-                search = start_search(store, goal, options, pool, sampler=sampler, stop=stop)
+                sampler, model_id = _sampler(store, task.planner, task.options.get("model_id"))
+                search = start_search(
+                    store,
+                    goal,
+                    options,
+                    pool,
+                    sampler=sampler,
+                    stop=stop,
+                    extra_parameters={"model_id": model_id, "eval_run_id": task.eval_run_id},
+                )
             _set_row(store, row_id, plan_run_id=search.run_id)
             result = search.run(timeout_s=task.timeout_s)
         status = result.status if result.status in ("solved", "timeout", "interrupted") else "failed"
@@ -532,6 +544,7 @@ def _pending_tasks(
     record: ProblemSetRecord,
     eval_run_id: int,
     planner: str,
+    label: str,
     seeds: Sequence[int],
     timeout_s: float,
     friction_scale: float,
@@ -542,7 +555,7 @@ def _pending_tasks(
     rows = session.scalars(
         select(EvalResult).where(
             (EvalResult.set_id == record.id)
-            & (EvalResult.planner == planner)
+            & (EvalResult.planner == label)
             & (EvalResult.timeout_s == timeout_s)
             & (EvalResult.friction_scale == friction_scale)
         )
@@ -565,6 +578,7 @@ def _pending_tasks(
                     problem_id=problem.id,
                     goal_key=problem.p_data.key,
                     planner=planner,
+                    label=label,
                     seed=int(seed),
                     timeout_s=float(timeout_s),
                     friction_scale=float(friction_scale),
@@ -587,11 +601,14 @@ def run_eval(
     workers: int = 1,
     parallel: int = 1,
     options: Mapping[str, Any] | None = None,
+    label: str | None = None,
     on_outcome: Callable[[TaskOutcome, EvalSummary], None] | None = None,
     on_start: Callable[[EvalSummary, int], None] | None = None,
 ) -> EvalSummary:
     """Run every (goal, seed) of a set not already finished; outcomes are stored as they come.
 
+    Results are stored under ``label`` (default: the planner kind, plus ``-<heuristic>`` when
+    ``options`` choose one), so variants of one planner are told apart in the report.
     Each task runs in its own process (spawned: nothing inherited), ``parallel`` at once. On
     Ctrl-C / SIGTERM / an exception from ``on_outcome`` the running tasks are asked to stop (their
     planners checkpoint and the rows become ``interrupted``), and the eval run is marked interrupted;
@@ -610,6 +627,17 @@ def run_eval(
     if not seeds:
         raise EvalInputError("give at least one seed")
     options = dict(options or {})
+    if label is None:
+        label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
+    if not label or len(label) > 32:
+        raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
+    if planner == "twisted":
+        from twisted.model.registry import ModelError, load_model
+
+        try:  # fail before starting any process when the model cannot be had
+            options["model_id"] = load_model(store, options.get("model_id")).model_id
+        except ModelError as exc:
+            raise EvalInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
     with store.session() as session:
         record = load_problem_set(session, set_name)
     if record is None:
@@ -618,19 +646,19 @@ def run_eval(
         eval_run_id = start_eval_run(
             session,
             set_id=record.id,
-            planner=planner,
+            planner=label,
             timeout_s=timeout_s,
             friction_scale=friction_scale,
             seeds=seeds,
             workers=workers,
             parallel=parallel,
-            parameters=options,
+            parameters={**options, "planner": planner},
         )
     with store.session() as session:
         tasks, done = _pending_tasks(
-            session, record, eval_run_id, planner, seeds, timeout_s, friction_scale, workers, options
+            session, record, eval_run_id, planner, label, seeds, timeout_s, friction_scale, workers, options
         )
-    summary = EvalSummary(eval_run_id, set_name, planner, len(record.problems) * len(seeds), done)
+    summary = EvalSummary(eval_run_id, set_name, label, len(record.problems) * len(seeds), done)
     if on_start is not None:
         on_start(summary, len(tasks))
 
