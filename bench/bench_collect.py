@@ -99,11 +99,19 @@ def main() -> None:
         print(f"  overall kept rate of the tried curves: {100 * kept_rate:.1f} %")
         print(f"  share of worker wall time inside the simulator: {100 * busy:.0f} %")
         print(f"  writer: {summary.commit_seconds:.1f} s committing {summary.batches} batches")
-        bound = 3600 * kept_rate / per_try
         print(
-            f"  => at most {bound:,.0f} kept/h per fully busy core with this simulator and this mix of "
-            "start crossing counts: kept/h/core = 3600 x kept rate / seconds per curve"
+            f"  => {3600 * kept_rate / per_try:,.0f} kept/h per core at this wall time per curve "
+            "(kept/h/core = 3600 x kept rate / seconds per curve)"
         )
+        if workers_cpu_s > 0:
+            cpu_per_try = workers_cpu_s / summary.tried
+            print(
+                "  worker CPU time per tried curve (simulation, P-data, store reads, start-up): "
+                f"{1000 * cpu_per_try:.0f} ms => {3600 * kept_rate / cpu_per_try:,.0f} kept/h on an "
+                "unshared core; reaching "
+                f"{TARGET_KEPT_PER_HOUR_PER_CORE:,} needs a kept rate of "
+                f"{100 * TARGET_KEPT_PER_HOUR_PER_CORE * cpu_per_try / 3600:.1f} % at this cost"
+            )
     print(f"(bench wall time {wall_s:.0f} s, including worker start-up)")
 
 
