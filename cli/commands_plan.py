@@ -264,7 +264,7 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
             "states": result.states,
             "plan": steps,
         }
-        console.print_json(json.dumps(payload))
+        typer.echo(json.dumps(payload))
         return
     outcome = "[bold green]solved[/]" if result.solved else f"[bold red]not solved ({result.status})[/]"
     console.print(
@@ -304,7 +304,7 @@ def replay_command(
     except PlanInputError as exc:
         fail(str(exc))
     if as_json:
-        console.print_json(
+        typer.echo(
             json.dumps(
                 {
                     "run_id": run_id,
