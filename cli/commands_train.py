@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -129,15 +130,34 @@ def train_command(
 
 
 @app.command("models")
-def models_command(ctx: typer.Context) -> None:
+def models_command(
+    ctx: typer.Context,
+    export: str | None = typer.Option(
+        None,
+        "--export",
+        help="Write a model (newest, or --id) to this file, e.g. twisted/data/default_model.pt.",
+    ),
+    model_id: int | None = typer.Option(None, "--id", help="The model to export (default: the newest)."),
+) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
-    from twisted.model.registry import default_model_path, list_models
+    from twisted.model.registry import ModelError, default_model_path, list_models, load_model
     from twisted.store import StoreError, open_store
 
     try:
         store = open_store(db_url(ctx))
     except StoreError as exc:
         fail(str(exc))
+    if export is not None:
+        try:
+            model = load_model(store, model_id)
+        except ModelError as exc:
+            fail(str(exc))
+        if model.model_id is None:
+            fail("the database holds no model to export: train one with `twisted train`")
+        target = Path(export)
+        target.write_bytes(model.to_bytes())
+        console.print(f"model {model.model_id} written to {target} ({target.stat().st_size / 1e6:.1f} MB)")
+        return
     models = list_models(store)
     if not models:
         path = default_model_path()

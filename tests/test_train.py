@@ -180,6 +180,13 @@ def test_finished_model_is_stored_listed_and_loaded_newest_first(
     assert info.training_run_id == second.training_run_id and info.data_size == second.n_train > 0
     assert {"val_loss", "val_nll_link", "val_link_accuracy"} <= set(info.metrics)
     assert 0 <= info.metrics["val_link_accuracy"] <= 1
+    # the stored weights are those of the epoch with the lowest validation loss
+    with store.session() as session:
+        history = session.get(TrainingRun, second.training_run_id).metrics["history"]
+    assert [h["epoch"] for h in history] == [0, 1]
+    best = min(history, key=lambda h: h["val_loss"])
+    assert info.metrics["best_epoch"] == best["epoch"]
+    assert info.metrics["val_loss"] == pytest.approx(best["val_loss"], rel=1e-5)
     newest = load_model(store)
     assert newest.model_id == second.model_id and newest.metadata["data_size"] == second.n_train
     assert load_model(store, first.model_id).model_id == first.model_id
@@ -203,7 +210,7 @@ def test_an_empty_model_table_falls_back_to_the_shipped_default(sqlite_url: str)
     assert path.stat().st_size <= 10 * 1024 * 1024
 
 
-def test_cli_train_then_models(small_store: tuple[str, dict[str, int]]) -> None:
+def test_cli_train_then_models(small_store: tuple[str, dict[str, int]], tmp_path) -> None:
     url, _ = small_store
     runner = CliRunner()
     result = runner.invoke(
@@ -214,6 +221,10 @@ def test_cli_train_then_models(small_store: tuple[str, dict[str, int]]) -> None:
     result = runner.invoke(app, ["--db", url, "models"])
     assert result.exit_code == 0, result.output
     assert "run-1" in result.output
+    exported = tmp_path / "exported.pt"
+    result = runner.invoke(app, ["--db", url, "models", "--export", str(exported)])
+    assert result.exit_code == 0, result.output
+    assert InverseModel.from_bytes(exported.read_bytes()).metadata["training_run_id"] == 1
     result = runner.invoke(app, ["--db", url, "train", "--resume"])
     assert result.exit_code == 2 and "no unfinished training run" in result.output
 

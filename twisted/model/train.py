@@ -8,7 +8,8 @@ elapsed time for a resumed run to draw exactly the batches an uninterrupted run 
 
 :func:`train` is what ``twisted train`` calls: it creates (or with ``resume=True`` continues) a
 ``training_runs`` row, checkpoints into the database every epoch and every ``checkpoint_every_s``,
-and stores the finished model in ``models`` with its data size and validation metrics.
+and stores the finished model in ``models`` with its data size and validation metrics. The model
+stored is the weights of the epoch with the lowest validation loss (small data overfits).
 """
 
 from __future__ import annotations
@@ -103,6 +104,10 @@ class Trainer:
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
         self.epoch = 0
         self.batch_index = 0  # batches of `epoch` already trained
+        # the weights of the epoch with the lowest validation loss: what a finished run stores
+        self.best_val_loss = math.inf
+        self.best_epoch = -1
+        self.best_net: dict[str, torch.Tensor] | None = None
 
     @property
     def batches_per_epoch(self) -> int:
@@ -156,6 +161,12 @@ class Trainer:
         self.batch_index = 0
         return True
 
+    def note_validation(self, epoch: int, val_loss: float) -> None:
+        """Keep a copy of the weights when ``val_loss`` is the best so far."""
+        if val_loss < self.best_val_loss:
+            self.best_val_loss, self.best_epoch = val_loss, epoch
+            self.best_net = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+
     def state_dict(self) -> dict[str, Any]:
         return {
             "net": self.net.state_dict(),
@@ -163,6 +174,9 @@ class Trainer:
             "epoch": self.epoch,
             "batch_index": self.batch_index,
             "torch_rng": torch.get_rng_state(),
+            "best_val_loss": self.best_val_loss,
+            "best_epoch": self.best_epoch,
+            "best_net": self.best_net,
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -171,6 +185,9 @@ class Trainer:
         self.epoch = int(state["epoch"])
         self.batch_index = int(state["batch_index"])
         torch.set_rng_state(state["torch_rng"])
+        self.best_val_loss = float(state.get("best_val_loss", math.inf))
+        self.best_epoch = int(state.get("best_epoch", -1))
+        self.best_net = state.get("best_net")
 
 
 def batch_losses(
@@ -404,6 +421,8 @@ def train(
             if completed:
                 val = evaluate(trainer.net, val_data, trainer.device) if len(val_data) else {}
                 history.append({"epoch": epoch, "elapsed_s": round(elapsed(), 1), **val})
+                if val:
+                    trainer.note_validation(epoch, val["val_loss"])
                 if progress is not None:
                     progress(
                         Progress(
@@ -428,8 +447,17 @@ def train(
         _set_status(store, run_id, "interrupted", elapsed())
         return TrainOutcome(run_id, "interrupted", None, {"history": history}, len(train_data), len(val_data))
 
+    if trainer.best_net is not None:
+        trainer.net.load_state_dict(trainer.best_net)  # the epoch with the lowest validation loss
     metrics = evaluate(trainer.net, val_data, trainer.device) if len(val_data) else {}
-    metrics.update({"epochs": trainer.epoch, "elapsed_s": round(elapsed(), 1), "n_train": len(train_data)})
+    metrics.update(
+        {
+            "epochs": trainer.epoch,
+            "best_epoch": trainer.best_epoch,
+            "elapsed_s": round(elapsed(), 1),
+            "n_train": len(train_data),
+        }
+    )
     net = trainer.net.to("cpu")
     model = InverseModel(
         net,
