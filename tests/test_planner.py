@@ -268,7 +268,11 @@ def test_sigterm_saves_a_checkpoint_and_exits_143(tmp_path: Path) -> None:
     )
     try:
         _wait_for_checkpoint(db_path, 0, proc, 60)
-        time.sleep(3.0)
+        # a live run cannot be resumed by a second process
+        code, out = _plan(db, "--resume", "1", "--timeout", "5")
+        assert code == 2 and "still being searched" in out
+        assert _plan(db, "--resume", "--timeout", "5")[0] == 2  # no resumable (non-live) run
+        time.sleep(2.0)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=30)
     finally:

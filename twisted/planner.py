@@ -766,6 +766,8 @@ def resume_search(
         raise PlanInputError(f"run {run_id} already solved its goal (see `twisted replay {run_id}`)")
     if info.checkpoint is None:
         raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
+    if info.live:
+        raise PlanInputError(f"run {run_id} is still being searched by process {info.pid}; stop it first")
     discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
     info = load_run(store, run_id)
     assert info is not None and info.checkpoint is not None

@@ -190,6 +190,26 @@ class SearchRunInfo:
     goal_node_id: int | None
     checkpoint: StoredCheckpoint | None
     nodes: list[StoredNode]
+    host: str | None = None
+    pid: int | None = None
+
+    @property
+    def live(self) -> bool:
+        """Still searched by another process of this host (a killed one left ``running`` behind is not).
+
+        A run of another host cannot be checked from here and counts as not live.
+        """
+        if self.status != "running" or self.host != socket.gethostname() or self.pid is None:
+            return False
+        if self.pid == os.getpid():
+            return False
+        try:
+            os.kill(self.pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
 
 
 # --- writing a run ---------------------------------------------------------------------------------------
@@ -423,6 +443,8 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             goal_node_id=row.goal_node_id,
             checkpoint=checkpoint,
             nodes=nodes,
+            host=run.host,
+            pid=run.pid,
         )
 
 
@@ -445,14 +467,19 @@ def discard_after_checkpoint(store: Any, run_id: int) -> int:
 
 
 def find_resumable_run(store: Any, goal: PData | None = None) -> int | None:
-    """The newest planner run that did not solve its goal (for ``goal`` when given), or None."""
+    """The newest planner run that did not solve its goal and is not live (for ``goal`` when given)."""
     with store.session() as session:
         query = select(SearchRunRow.run_id).where(SearchRunRow.outcome != "solved")
         if goal is not None:
             query = query.join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id).where(
                 TopologicalState.key == goal.key
             )
-        return session.scalar(query.order_by(SearchRunRow.run_id.desc()).limit(1))
+        candidates = list(session.scalars(query.order_by(SearchRunRow.run_id.desc())))
+    for run_id in candidates:
+        info = load_run(store, run_id, with_nodes=False)
+        if info is not None and not info.live:
+            return run_id
+    return None
 
 
 def solution_path(store: Any, run_id: int) -> list[StoredNode]:
