@@ -664,9 +664,30 @@ def run_eval(
 
     ctx = multiprocessing.get_context("spawn")
     queue = ctx.Queue()
-    running: dict[int, Any] = {}  # pid -> process
+    running: dict[tuple[str, int], Any] = {}  # (goal, seed) -> process that has not reported yet
+    dead_since: dict[tuple[str, int], float] = {}
     queued = list(reversed(tasks))
     status, message = "finished", None
+
+    def received(outcome: TaskOutcome) -> None:
+        summary.outcomes.append(outcome)
+        proc = running.pop((outcome.goal_key, outcome.seed), None)
+        if proc is not None:
+            proc.join()
+
+    def reap_silent() -> list[TaskOutcome]:
+        """Children that died without reporting (killed); a clean exit's report may still be in the pipe."""
+        lost = []
+        for key, proc in list(running.items()):
+            if proc.is_alive():
+                continue
+            first = dead_since.setdefault(key, time.monotonic())
+            if proc.exitcode != 0 or time.monotonic() - first > 10.0:
+                running.pop(key).join()
+                lost.append(
+                    TaskOutcome(key[0], key[1], "failed", message=f"worker exited with code {proc.exitcode}")
+                )
+        return lost
 
     def stop_children() -> None:
         for proc in running.values():
@@ -675,11 +696,9 @@ def run_eval(
         deadline = time.monotonic() + 60.0
         while running and time.monotonic() < deadline:
             try:
-                summary.outcomes.append(queue.get(timeout=0.5))
+                received(queue.get(timeout=0.5))
             except queue_module.Empty:
-                pass
-            for pid in [p for p, proc in running.items() if not proc.is_alive()]:
-                running.pop(pid).join()
+                summary.outcomes.extend(reap_silent())
         for proc in running.values():
             proc.kill()
             proc.join()
@@ -692,23 +711,15 @@ def run_eval(
                 task = queued.pop()
                 proc = ctx.Process(target=_task_process, args=(db_url, task, queue), daemon=False)
                 proc.start()
-                running[proc.pid] = proc
+                running[(task.goal_key, task.seed)] = proc
             try:
-                outcome = queue.get(timeout=0.5)
-            except queue_module.Empty:  # nothing yet: reap children that died without reporting
-                for pid in [p for p, proc in running.items() if not proc.is_alive()]:
-                    proc = running.pop(pid)
-                    proc.join()
-                    if proc.exitcode != 0:
-                        summary.outcomes.append(
-                            TaskOutcome("?", -1, "failed", message=f"worker exited with code {proc.exitcode}")
-                        )
-                continue
-            summary.outcomes.append(outcome)
-            for pid in [p for p, proc in running.items() if not proc.is_alive()]:
-                running.pop(pid).join()
-            if on_outcome is not None:
-                on_outcome(outcome, summary)
+                outcomes = [queue.get(timeout=0.5)]
+            except queue_module.Empty:
+                outcomes = reap_silent()
+            for outcome in outcomes:
+                received(outcome)
+                if on_outcome is not None:
+                    on_outcome(outcome, summary)
     except BaseException as exc:
         status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
         message = None if status == "interrupted" else repr(exc)
