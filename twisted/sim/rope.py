@@ -55,6 +55,9 @@ MAX_HEIGHT_M = 0.3
 MIN_HEIGHT_M = -LINK_RADIUS_M / 2  # a centreline point this far under the table surface: through it
 MAX_PENETRATION_M = LINK_RADIUS_M
 
+# 5 ms rather than 2 ms: measured on 300 random curves from reached configurations, 0.032 s cpu
+# per action against 0.064 s, with the same rejections (none from the physics), crossings settled
+# with a ~2-radius vertical gap and the same random-curve crossing statistics.
 DEFAULT_TIMESTEP_S = 0.005
 
 _INSTABILITY_WARNINGS = [
@@ -68,7 +71,8 @@ _INSTABILITY_WARNINGS = [
 class Curve:
     """One curve action: grasp ``link``, lift by ``z_max_m``, move it by ``(x_m, y_m)``, release.
 
-    ``x_m``/``y_m`` are a displacement relative to the grasped link's current position. Values
+    ``x_m``/``y_m`` are a displacement relative to the grasped link's current position; the
+    link's peak lift is ``z_max_m + MIN_LIFT_M`` (so z_max = 0 still clears the table). Values
     outside ``CURVE_LOW..CURVE_HIGH`` are allowed (a sampled curve may stray); the simulator rejects
     a result that leaves the workspace. A negative ``z_max_m`` counts as 0.
     """
