@@ -55,6 +55,15 @@ def collect_command(
     ),
     max_tries: int | None = typer.Option(None, "--max-tries", help="Also stop after this many tried curves."),
     friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (1 = nominal)."),
+    use_ray: bool = typer.Option(
+        False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
+    ),
+    ray_address: str | None = typer.Argument(
+        None,
+        metavar="ADDRESS",
+        help="With --ray: the cluster (host:port, ray://host:10001, auto, local); default: the one "
+        "`ray start` runs here, else a new local one.",
+    ),
 ) -> None:
     """Collect transitions that add crossings (D_Q reset scheme) into the database, resumably.
 
@@ -62,7 +71,15 @@ def collect_command(
     stops cleanly (the last batch is committed and the run marked interrupted).
     """
     from twisted.collect import CollectError, CollectOptions, CollectProgress, collect, default_workers
+    from twisted.distributed import DistributedError, collect_on_ray, import_ray, resolve_address
     from twisted.store import StoreError, open_store
+
+    try:  # Ray problems first, before any database is created
+        address = resolve_address(use_ray, ray_address)
+        if use_ray:
+            import_ray()
+    except DistributedError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
 
     options = CollectOptions(
         hours=hours,
@@ -121,7 +138,13 @@ def collect_command(
                 note="[yellow]stopping[/]" if p.stopping else "",
             )
 
-        summary = collect(store, options, on_progress=show)
+        try:
+            if use_ray:  # the same run on Ray actors (twisted/distributed.py)
+                summary = collect_on_ray(store, options, address, workers=workers, on_progress=show)
+            else:
+                summary = collect(store, options, on_progress=show)
+        except DistributedError as exc:
+            fail(str(exc), EXIT_BAD_INPUT)
 
     console.print(
         f"run {summary.run_id} {summary.status}: kept {summary.kept:,} of {summary.tried:,} curves "
@@ -203,4 +226,41 @@ def stats_command(
             _num(row["kept_per_hour"]),
             _num(row["kept_per_hour_per_worker"]),
         )
+    console.print(table)
+
+
+@app.command("db")
+def db_command(ctx: typer.Context) -> None:
+    """Show the database: where it is, its schema revisions, and the rows in each table (read-only)."""
+    import importlib
+    import pkgutil
+
+    from sqlalchemy import func, inspect, select, text
+
+    import twisted.store
+    from twisted.store import Base, StoreError, head_revisions, open_store
+
+    for module in pkgutil.iter_modules(twisted.store.__path__):
+        importlib.import_module(f"twisted.store.{module.name}")
+    try:
+        store = open_store(db_url(ctx), create=False)
+    except StoreError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+    with store, store.session() as session:
+        revisions = sorted(r[0] for r in session.execute(text("SELECT version_num FROM alembic_version")))
+        present = set(inspect(session.connection()).get_table_names())
+        counts = {
+            name: session.scalar(select(func.count()).select_from(table))
+            for name, table in sorted(Base.metadata.tables.items())
+            if name in present
+        }
+    console.print(f"database: {store.url.render_as_string(hide_password=True)} ({store.dialect})")
+    console.print(
+        f"schema revisions: {', '.join(revisions)} (this twisted: {', '.join(sorted(head_revisions()))})"
+    )
+    table = Table(title="Rows per table")
+    table.add_column("table")
+    table.add_column("rows", justify="right")
+    for name, n in counts.items():
+        table.add_row(name, _num(n))
     console.print(table)

@@ -170,6 +170,13 @@ def test_stats_on_missing_database_exit_2(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_db_command_shows_revisions_and_rows(sqlite_url: str) -> None:
+    open_store(sqlite_url).close()
+    result = _twisted(sqlite_url, "db")
+    assert result.returncode == 0, result.stderr
+    assert "schema revisions" in result.stdout and "transitions" in result.stdout
+
+
 def test_options_are_validated() -> None:
     for bad in (
         CollectOptions(hours=-0.5),

@@ -19,7 +19,9 @@ Processes: ``workers`` simulation processes (each owns a ``RopeSim`` and a gener
 ``SeedSequence([seed, run_id])``) send small batches (every ``batch_size`` kept transitions or
 ``batch_seconds``) to the main process, the ONE writer, which commits each batch in one transaction
 under its idempotency id ``"<run>-<worker>-<seq>"`` and refreshes the run's counters with it. Workers
-pick up newly committed configurations from the store every ``refresh_seconds``.
+pick up newly committed configurations (``id`` above the last seen) every ``refresh_seconds``. (On
+PostgreSQL two collectors' transactions may commit ids out of order; a configuration committed late
+under a smaller id then joins a worker's D_Q only at the next run. Nothing is lost from the store.)
 
 Stopping: at the deadline, at ``max_kept``/``max_tries``, or on SIGINT/SIGTERM the workers finish their
 current curve, send their last batch, and the run is marked ``finished`` (deadline/limits) or
