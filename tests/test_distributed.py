@@ -1,0 +1,308 @@
+"""Collection and evaluation on a local Ray cluster (2 CPUs, one per module): SQLite with the driver as the
+one writer, PostgreSQL with the workers writing, a worker killed mid-run, eval tasks, the CLI's --ray."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from sqlalchemy import func, select
+from typer.testing import CliRunner
+
+from twisted.collect import CollectOptions, CollectProgress
+from twisted.sim import Curve, RopeSim
+from twisted.store import CollectBatch, Configuration, Run, TopologicalState, Transition, open_store
+from twisted.store.experiments import EvalResult, ProblemRecord, save_problem_set
+from twisted.topology import parse_p_data
+
+ray = pytest.importorskip("ray")
+
+from twisted.distributed import (  # noqa: E402 - after the skip: needs ray
+    DistributedError,
+    collect_on_ray,
+    eval_on_ray,
+    ray_cluster,
+    resolve_address,
+)
+
+pytestmark = pytest.mark.ray
+REPO = Path(__file__).resolve().parents[1]
+ONE = parse_p_data([[1, "O", 2, "+"], [2, "U", 1, "+"]])
+ONE_UNDER = parse_p_data([[1, "U", 2, "+"], [2, "O", 1, "+"]])
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_ray() -> Any:
+    """One local Ray cluster of 2 CPUs for the module (starting one takes ~10 s)."""
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    yield ray
+    ray.shutdown()
+
+
+def check_collect_rows(url: str) -> None:
+    """Counters equal committed rows, no transition or batch twice, one root, every move adds crossings."""
+    with open_store(url) as store, store.session() as session:
+        for run in session.scalars(select(Run).where(Run.kind == "collect")):
+            n = session.scalar(select(func.count(Transition.id)).where(Transition.run_id == run.id))
+            kept, tried, rejected = session.execute(
+                select(
+                    func.coalesce(func.sum(CollectBatch.kept), 0),
+                    func.coalesce(func.sum(CollectBatch.tried), 0),
+                    func.coalesce(func.sum(CollectBatch.rejected), 0),
+                ).where(CollectBatch.run_id == run.id)
+            ).one()
+            assert (run.kept, run.tried, run.rejected) == (n, tried, rejected) and kept == n
+        curves = session.execute(
+            select(
+                Transition.from_configuration_id,
+                Transition.link,
+                Transition.z_max_m,
+                Transition.x_m,
+                Transition.y_m,
+            )
+        ).all()
+        assert len(curves) == len(set(curves)), "a transition was stored twice"
+        targets = list(session.scalars(select(Transition.to_configuration_id)))
+        assert len(targets) == len(set(targets))
+        assert session.scalar(select(func.count(Configuration.id))) == len(targets) + 1, "one root"
+        assert not session.scalar(
+            select(func.count(Transition.id)).where(Transition.to_cross <= Transition.from_cross)
+        )
+
+
+def replay_some(url: str, n: int = 3) -> None:
+    """Stored transitions replay exactly in the simulator (the workers stored what they simulated)."""
+    sim = RopeSim()
+    with open_store(url) as store, store.session() as session:
+        for t in session.scalars(select(Transition).order_by(Transition.id).limit(n)):
+            start = session.get(Configuration, t.from_configuration_id)
+            end = session.get(Configuration, t.to_configuration_id)
+            state = session.get(TopologicalState, t.to_state_id)
+            assert start is not None and end is not None and state is not None
+            sim.set_state(start.q_array())
+            assert sim.apply(Curve(t.link, t.z_max_m, t.x_m, t.y_m)).ok
+            assert np.array_equal(sim.state(), end.q_array())
+            assert sim.p_data() == parse_p_data(state.p_data)
+
+
+def committed(url: str) -> tuple[set[tuple], set[tuple]]:
+    """(transitions, batches) committed so far, read through a separate connection."""
+    with open_store(url) as store, store.session() as session:
+        transitions = {tuple(r) for r in session.execute(select(Transition.__table__)).all()}
+        batches = {tuple(r) for r in session.execute(select(CollectBatch.batch_id, CollectBatch.kept)).all()}
+    return transitions, batches
+
+
+def collect_worker_pids() -> list[int]:
+    """Processes of the CollectWorker actors (Ray names them ``ray::CollectWorker...``)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cmdline = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if cmdline.startswith(b"ray::CollectWorker"):
+                pids.append(int(entry.name))
+    return sorted(pids)
+
+
+# --- collect ------------------------------------------------------------------------------------------
+
+
+def test_collect_into_sqlite_through_one_writer(sqlite_url: str) -> None:
+    seen: list[CollectProgress] = []
+    with open_store(sqlite_url) as store:
+        options = CollectOptions(hours=60 / 3600, seed=3, max_kept=4, batch_size=2)
+        summary = collect_on_ray(store, options, on_progress=lambda p: seen.append(p))
+    assert summary.status == "finished", summary.message
+    assert summary.workers == 2 and summary.kept >= 4 and summary.tried > summary.kept
+    assert summary.kept == sum(summary.kept_by_to_cross.values())
+    assert seen and seen[-1].kept == summary.kept
+    check_collect_rows(sqlite_url)
+    replay_some(sqlite_url)
+    with open_store(sqlite_url) as store, store.session() as session:
+        run = session.get(Run, summary.run_id)
+        assert run is not None and run.status == "finished" and run.seed == 3
+        assert run.parameters["workers"] == 2 and run.parameters["ray"]["writer"] == "driver"
+        workers = set(session.scalars(select(CollectBatch.worker).where(CollectBatch.kept > 0)))
+    assert workers <= {0, 1}
+
+
+@pytest.mark.postgres
+def test_collect_into_postgres_written_by_the_workers(postgres_url: str) -> None:
+    with open_store(postgres_url) as store:
+        summary = collect_on_ray(store, CollectOptions(hours=60 / 3600, seed=4, max_kept=4, batch_size=2))
+    assert summary.status == "finished", summary.message
+    assert summary.kept >= 4
+    check_collect_rows(postgres_url)
+    replay_some(postgres_url)
+    with open_store(postgres_url) as store, store.session() as session:
+        run = session.get(Run, summary.run_id)
+        assert run is not None and run.parameters["ray"]["writer"] == "workers"
+        assert run.wall_seconds == pytest.approx(summary.wall_seconds) and run.wall_seconds > 0
+
+
+@pytest.mark.postgres
+def test_killed_worker_is_restarted_and_nothing_is_lost_or_stored_twice(postgres_url: str) -> None:
+    killed: list[tuple[int, float]] = []
+    snapshot: list[tuple[set[tuple], set[tuple]]] = []
+
+    def kill_one(progress: CollectProgress) -> None:
+        if not killed and progress.batches >= 3:
+            snapshot.append(committed(postgres_url))
+            pid = collect_worker_pids()[0]
+            os.kill(pid, signal.SIGKILL)  # mid-batch: no chance to finish or roll back by itself
+            killed.append((pid, progress.elapsed_s))
+
+    with open_store(postgres_url) as store:
+        options = CollectOptions(hours=30 / 3600, seed=5, batch_size=1, batch_seconds=1.0)
+        summary = collect_on_ray(store, options, max_restarts=1, on_progress=kill_one)
+    assert killed, "no worker was killed"
+    assert summary.status == "finished", summary.message
+    transitions_before, batches_before = snapshot[0]
+    transitions_after, batches_after = committed(postgres_url)
+    assert transitions_before <= transitions_after and batches_before <= batches_after
+    assert len(batches_after) > len(batches_before)
+    check_collect_rows(postgres_url)
+    # Ray restarted the killed actor: both workers committed batches after the kill
+    with open_store(postgres_url) as store, store.session() as session:
+        late = session.execute(
+            select(CollectBatch.worker, func.max(CollectBatch.seq)).group_by(CollectBatch.worker)
+        ).all()
+    assert {w for w, _ in late} == {0, 1}
+    assert killed[0][0] not in collect_worker_pids()
+
+
+def test_dead_worker_without_restart_loses_one_batch_and_the_run_goes_on(sqlite_url: str) -> None:
+    killed: list[float] = []
+    snapshot: list[tuple[set[tuple], set[tuple]]] = []
+
+    def kill_one(progress: CollectProgress) -> None:
+        if not killed and progress.batches >= 2:
+            snapshot.append(committed(sqlite_url))
+            os.kill(collect_worker_pids()[-1], signal.SIGKILL)
+            killed.append(progress.elapsed_s)
+
+    with open_store(sqlite_url) as store:
+        options = CollectOptions(hours=20 / 3600, seed=6, batch_size=1, batch_seconds=1.0)
+        summary = collect_on_ray(store, options, max_restarts=0, on_progress=kill_one)
+    assert killed
+    assert summary.status == "finished"
+    assert summary.message is not None and "died, lost its batch" in summary.message
+    transitions_before, batches_before = snapshot[0]
+    transitions_after, batches_after = committed(sqlite_url)
+    assert transitions_before <= transitions_after and batches_before <= batches_after
+    check_collect_rows(sqlite_url)
+    # the survivor went on: it committed more batches than the dead worker
+    with open_store(sqlite_url) as store, store.session() as session:
+        per_worker = dict(
+            session.execute(select(CollectBatch.worker, func.count()).group_by(CollectBatch.worker)).all()
+        )
+    assert len(per_worker) == 2 and max(per_worker.values()) > min(per_worker.values())
+
+
+def test_options_that_do_not_fit_the_cluster_are_refused(sqlite_url: str) -> None:
+    with open_store(sqlite_url) as store:
+        with pytest.raises(DistributedError, match="more than the 2 CPUs"):
+            collect_on_ray(store, CollectOptions(hours=0.01), workers=3)
+        with pytest.raises(DistributedError, match="SQLite"):
+            collect_on_ray(store, CollectOptions(hours=0.01), writer="workers")
+        with store.session() as session:
+            assert session.scalar(select(func.count(Run.id))) == 0  # nothing started
+
+
+def test_resolve_address() -> None:
+    assert resolve_address(True, None) is None
+    assert resolve_address(True, "auto") == "auto"
+    assert resolve_address(False, None) is None
+    with pytest.raises(DistributedError, match="goes after --ray"):
+        resolve_address(False, "10.0.0.1:6379")
+
+
+def test_ray_cluster_reuses_the_connection_it_finds() -> None:
+    with ray_cluster("an-address-never-used-because-ray-is-initialised") as module:
+        assert module.is_initialized()
+    assert ray.is_initialized()  # left open: it was not ours
+
+
+# --- eval ---------------------------------------------------------------------------------------------
+
+
+def _two_goal_set(url: str) -> None:
+    with open_store(url) as store, store.session(write=True) as session:
+        problems = [ProblemRecord(None, i, p, 0, "imported") for i, p in enumerate((ONE, ONE_UNDER))]
+        save_problem_set(session, "ones", problems, source="imported")
+
+
+@pytest.mark.parametrize("backend", ["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def test_eval_tasks_on_ray_store_one_row_each_and_rerun_skips_them(
+    backend: str, request: pytest.FixtureRequest
+) -> None:
+    url = request.getfixturevalue("sqlite_url" if backend == "sqlite" else "postgres_url")
+    _two_goal_set(url)
+    kwargs: dict[str, Any] = {"timeout_s": 1.5, "seeds": [0, 1], "workers": 1}
+    with open_store(url) as store:
+        summary = eval_on_ray(store, url, "ones", "random-low", **kwargs)
+        assert summary.status == "finished" and summary.total == 4
+        assert sorted((o.goal_key, o.seed) for o in summary.outcomes) == sorted(
+            (g.key, s) for g in (ONE, ONE_UNDER) for s in (0, 1)
+        )
+        assert {o.status for o in summary.outcomes} <= {"solved", "timeout"}
+        with store.session() as session:
+            rows = session.scalars(select(EvalResult)).all()
+            hosts_pids = {(r.host, r.pid) for r in rows}
+        assert len(rows) == 4 and all(r.status in ("solved", "timeout") for r in rows)
+        assert all(pid != os.getpid() for _, pid in hosts_pids)  # run by Ray workers, not here
+        again = eval_on_ray(store, url, "ones", "random-low", **kwargs)
+    assert again.already_done == 4 and again.outcomes == []
+
+
+# --- CLI ----------------------------------------------------------------------------------------------
+
+
+def _cli(*args: str) -> Any:
+    from cli.main import app
+
+    return CliRunner().invoke(app, list(args))
+
+
+def test_cli_collect_with_ray(sqlite_url: str) -> None:
+    result = _cli("--db", sqlite_url, "collect", "--hours", "0.01", "--max-kept", "2", "--ray", "--seed", "8")
+    assert result.exit_code == 0, result.output
+    assert "kept" in result.output
+    check_collect_rows(sqlite_url)
+    with open_store(sqlite_url) as store, store.session() as session:
+        run = session.scalars(select(Run)).one()
+        assert run.status == "finished" and run.parameters["ray"]["writer"] == "driver"
+
+
+def test_cli_ray_errors_exit_2(sqlite_url: str) -> None:
+    result = _cli("--db", sqlite_url, "collect", "--hours", "0.01", "--ray", "--workers", "3")
+    assert result.exit_code == 2 and "more than the 2 CPUs" in " ".join(result.output.split())
+    result = _cli("--db", sqlite_url, "collect", "--hours", "0.01", "somewhere:6379")
+    assert result.exit_code == 2 and "after --ray" in " ".join(result.output.split())
+
+
+def test_cli_without_ray_installed_says_how_to_install(tmp_path: Path) -> None:
+    # ray made unimportable in a fresh interpreter (what a base install without the extra looks like)
+    code = (
+        "import sys; sys.modules['ray'] = None; sys.argv = ['twisted', '--db', sys.argv[1], 'collect', "
+        "'--hours', '0.01', '--ray']; from cli.main import run; run()"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code, f"sqlite:///{tmp_path / 'x.db'}"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    err = " ".join(result.stderr.split())
+    assert result.returncode == 2, result.stderr
+    assert "pip install 'twisted-knots[distributed]'" in err
