@@ -168,7 +168,8 @@ def _eval(
             task_id = bar.add_task("eval", total=pending, solved=0)
 
         def on_outcome(outcome: Any, summary: Any) -> None:
-            bar.update(task_id, advance=1, solved=summary.solved)
+            if task_id is not None:
+                bar.update(task_id, advance=1, solved=summary.solved)
             if outcome.status == "failed":
                 err_console.print(f"goal {outcome.goal_key} seed {outcome.seed} failed: {outcome.message}")
 

@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
@@ -141,6 +142,10 @@ def split_thirds(frequencies: Mapping[str, int]) -> tuple[list[str], list[str], 
     return easy, medium, hard
 
 
+def _constant(tag: str) -> Callable[[str], str]:
+    return lambda _key: tag
+
+
 def _sample(pool: Sequence[str], n: int, rng: np.random.Generator) -> list[str]:
     if len(pool) <= n:
         return list(pool)
@@ -159,7 +164,7 @@ def make_problem_sets(
     """Draw the goal sets from our data (pure: no store).
 
     ``frequencies``: key -> (state, transitions reaching it) for the visited states;
-    ``reachable(c)``: the c-crossing states the high level reaches (only called for unseen-3 and 4).
+    ``reachable(c)``: the c-crossing states the high level reaches (c = 3, and 4 when needed).
     Goals of a set are listed most frequent first.
     """
     if per_set < 1:
@@ -186,13 +191,12 @@ def make_problem_sets(
     for name, third in zip(DIFFICULTY_SETS, split_thirds(three), strict=True):
         picked = _sample(third, per_set, rng)
         if name in wanted:
-            out[name] = records(picked, lambda k, name=name: name, {k: visited[k][0] for k in picked})
-    if UNSEEN_SET in wanted or FOUR_SET in wanted:
-        all3 = {p.key: p for p in reachable(3)}
-        unseen = sorted(k for k in all3 if k not in visited)
-        picked = _sample(unseen, per_set, rng)
-        if UNSEEN_SET in wanted:
-            out[UNSEEN_SET] = records(picked, lambda k: "unseen", all3)
+            out[name] = records(picked, _constant(name), {k: visited[k][0] for k in picked})
+    all3 = {p.key: p for p in reachable(3)}
+    unseen = sorted(k for k in all3 if k not in visited)
+    picked = _sample(unseen, per_set, rng)
+    if UNSEEN_SET in wanted:
+        out[UNSEEN_SET] = records(picked, _constant("unseen"), all3)
     if FOUR_SET in wanted:
         four_visited = sorted(k for k, (p, _) in visited.items() if p.cross == 4)
         picked = _sample(four_visited, per_set, rng)
@@ -780,10 +784,10 @@ def load_results(session: Any, set_names: Sequence[str] | None = None) -> list[R
     ]
 
 
-def success_curve(times_s: Sequence[float | None], grid_s: Sequence[float]) -> np.ndarray:
+def success_curve(times_s: Sequence[float | None], grid_s: npt.ArrayLike) -> np.ndarray:
     """Fraction of attempts solved within each time of ``grid_s`` (None = not solved)."""
     if not times_s:
-        return np.zeros(len(grid_s))
+        return np.zeros(np.shape(grid_s)[0])
     solved = np.array([t for t in times_s if t is not None], dtype=np.float64)
     grid = np.asarray(grid_s, dtype=np.float64)
     return (solved[None, :] <= grid[:, None]).sum(axis=1) / len(times_s)

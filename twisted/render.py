@@ -464,8 +464,9 @@ def render_run(
         what = "start" if i == 0 else f"after curve {i}/{n_steps}"
         goal_mark = "  = goal" if node.p_data == info.goal else ""
         draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
-        if i < n_steps and path[i + 1].curve is not None:
-            _draw_curve(ax, node.points, path[i + 1].curve)
+        next_curve = path[i + 1].curve if i < n_steps else None
+        if next_curve is not None:
+            _draw_curve(ax, node.points, next_curve)
         return fig
 
     files = [save_png(frame(n_steps), out_png)]
