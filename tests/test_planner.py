@@ -13,6 +13,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -24,7 +25,9 @@ from twisted.moves import plans
 from twisted.planner import (
     Node,
     PlannerOptions,
+    RandomCurves,
     SearchTree,
+    StopSignals,
     Twisted,
     check_goal,
     replay,
@@ -185,6 +188,38 @@ def test_stop_and_resume_gives_the_same_tree_as_one_run(db_url: str) -> None:
         with store.session() as session:
             row = session.get(SearchRunRow, first.run_id)
             assert row is not None and row.outcome == "stopped"
+
+
+class _StopOnCall(RandomCurves):
+    """Random curves that raise a stop request on their ``n``-th call: the pool wait right after it
+    is cut short, inside an iteration, as a Ctrl-C would do."""
+
+    def __init__(self, stop: StopSignals, n: int) -> None:
+        self.stop, self.n, self.calls = stop, n, 0
+
+    def sample(self, *args: Any, **kwargs: Any) -> list[Any]:
+        self.calls += 1
+        if self.calls == self.n:
+            self.stop.signum = signal.SIGTERM
+        return super().sample(*args, **kwargs)
+
+
+def test_a_stop_mid_iteration_is_rolled_back_so_the_search_continues_identically(tmp_path: Path) -> None:
+    goal = check_goal(THREE_CROSSINGS)
+    options = PlannerOptions(planner="random-low", seed=5, k=3, p_expand=0.3, k_expand=5)
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        whole = start_search(store, goal, options, pool)
+        whole.run(max_iterations=7)
+        stop = StopSignals()
+        cut = start_search(store, goal, options, pool, sampler=_StopOnCall(stop, 5), stop=stop)
+        first = cut.run()
+        assert first.status == "interrupted" and first.iterations == 4  # the 5th was dropped
+        assert len(cut.tree) == first.nodes == cut._saved
+        stop.signum = None
+        second = cut.run(max_iterations=7)
+        assert second.elapsed_s > first.elapsed_s
+        assert _tree_signature(store, whole.run_id) == _tree_signature(store, cut.run_id)
+        assert second.sim_calls == whole.sim_calls
 
 
 def _wait_for_checkpoint(db_path: Path, min_iteration: int, proc: subprocess.Popen, limit_s: float) -> None:

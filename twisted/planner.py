@@ -161,6 +161,16 @@ class SearchTree:
         self.by_state[key].append(node.index)
         return node
 
+    def truncate(self, size: int) -> None:
+        """Forget the nodes created after the first ``size`` (an iteration that was not finished)."""
+        while len(self.nodes) > size:
+            node = self.nodes.pop()
+            key = node.p_data.key
+            self.by_state[key].pop()
+            if not self.by_state[key]:
+                del self.by_state[key]
+                del self.states[key]
+
     def path(self, index: int) -> list[Node]:
         """The nodes from the root to node ``index``."""
         out = []
@@ -363,15 +373,18 @@ class Twisted:
             self.goal_node = tree.nodes[tree.by_state[goal.key][0]]
 
         self._saved = len(tree)  # nodes already in the store
-        self._t0 = time.perf_counter()
-        self._last_save = self._t0
+        self._t0: float | None = None  # set while run() is searching
+        self._last_save = time.perf_counter()
+        self._deadline_s: float | None = None
         self._boundary = self._checkpoint()
 
     # -- bookkeeping ------------------------------------------------------------------------------------
 
     @property
     def elapsed_s(self) -> float:
-        return self.elapsed_before_s + (time.perf_counter() - self._t0)
+        """Search time so far, over every run() and resumed process."""
+        running_s = 0.0 if self._t0 is None else time.perf_counter() - self._t0
+        return self.elapsed_before_s + running_s
 
     def _checkpoint(self) -> Checkpoint:
         return Checkpoint(
@@ -433,6 +446,9 @@ class Twisted:
             if self.progress is not None:
                 self.progress(self)
         self._boundary.elapsed_s = self.elapsed_s  # the discarded part still counts toward the timeout
+        self.elapsed_before_s, self._t0 = self._boundary.elapsed_s, None
+        if status != "solved":
+            self._rollback(committed)
         self._save(committed, self._boundary)
         if self.recorder is not None:
             self.recorder.finish(status, self.goal_node, self._boundary)
@@ -446,6 +462,16 @@ class Twisted:
             states=len({self.tree.nodes[i].p_data.key for i in range(committed)}),
             path=self.tree.path(self.goal_node.index) if self.goal_node is not None else [],
         )
+
+    def _rollback(self, committed: int) -> None:
+        """Back to the last iteration boundary, exactly what a resume from the store would load."""
+        self.tree.truncate(committed)
+        for key in [key for key in self.plans if key not in self.tree.states]:
+            del self.plans[key]
+        self.rng.bit_generator.state = self._boundary.rng_state
+        self.iteration = self._boundary.iteration
+        self.sim_calls = self._boundary.sim_calls
+        self.stats = {table: {k: list(v) for k, v in e.items()} for table, e in self._boundary.stats.items()}
 
     def twisted_iteration(self) -> None:
         """Lines 5-12 of Algorithm 1."""
