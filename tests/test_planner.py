@@ -62,8 +62,8 @@ def _plan(db: str, *args: str) -> tuple[int, str]:
 # --- the whole loop -----------------------------------------------------------------------------------
 
 
-def test_random_low_finds_a_one_crossing_plan_and_it_replays(tmp_path: Path) -> None:
-    db = _db(tmp_path)
+def test_random_low_finds_a_one_crossing_plan_and_it_replays(db_url: str) -> None:
+    db = db_url
     code, out = _plan(
         db, "--goal", ONE_CROSSING, "--planner", "random-low", "--workers", "1", "--timeout", "120", "--json"
     )
@@ -78,8 +78,9 @@ def test_random_low_finds_a_one_crossing_plan_and_it_replays(tmp_path: Path) -> 
         assert replayed.reached_goal
         assert all(step.matches for step in replayed.steps)
         assert [step.curve.link for step in replayed.steps] == [row["link"] for row in result["plan"]]
-    code, out = runner.invoke(app, ["--db", db, "replay", str(result["run_id"])]).exit_code, ""
-    assert code == 0
+    replayed_cli = runner.invoke(app, ["--db", db, "replay", str(result["run_id"]), "--json"])
+    assert replayed_cli.exit_code == 0, replayed_cli.output
+    assert json.loads(replayed_cli.output)["reached_goal"] is True
 
 
 def test_tree_keeps_only_results_that_do_not_lose_crossings_nor_overshoot(tmp_path: Path) -> None:
