@@ -33,17 +33,23 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--steps", nargs="+", default=["0->1", "1->2", "2->3", "+2"])
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument(
+        "--side",
+        choices=("held_out", "train", "all"),
+        default="held_out",
+        help="train: the model's own training transitions (a check of the pipeline)",
+    )
     args = ap.parse_args()
 
     store = open_store(args.db)
     model = load_model(None if args.default else store, args.model_id)
     rng = np.random.default_rng(args.seed)
-    held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps)
+    held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
     meta = model.metadata
     print(
         f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
         f"{meta.get('data_size')} transitions, val metrics {meta.get('metrics', {}).get('val_loss')}; "
-        f"{len(held)} held-out transitions from {args.db}"
+        f"{len(held)} {args.side} transitions from {args.db}"
     )
     t0 = time.perf_counter()
     with SimPool(args.workers) as pool:

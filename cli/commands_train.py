@@ -121,12 +121,17 @@ def train_command(
         return
     console.print(
         f"model {outcome.model_id} stored (training run {outcome.training_run_id}, "
-        f"{outcome.n_train} training / {outcome.n_val} validation transitions): "
-        f"val NLL {_fmt(m.get('val_loss'))} "
-        f"(link {_fmt(m.get('val_nll_link'))}, z {_fmt(m.get('val_nll_z'))}, x {_fmt(m.get('val_nll_x'))}, "
-        f"y {_fmt(m.get('val_nll_y'))}), link accuracy {_fmt(m.get('val_link_accuracy'), '.3f')}, "
-        f"top-3 {_fmt(m.get('val_link_top3'), '.3f')}"
+        f"{outcome.n_train} training / {outcome.n_val} validation transitions, "
+        f"best epoch {m.get('best_epoch')})"
     )
+    for side in ("val", "train"):
+        if f"{side}_loss" in m:
+            console.print(
+                f"  {side:5s} NLL {_fmt(m.get(f'{side}_loss'))} (link {_fmt(m.get(f'{side}_nll_link'))}, "
+                f"z {_fmt(m.get(f'{side}_nll_z'))}, x {_fmt(m.get(f'{side}_nll_x'))}, "
+                f"y {_fmt(m.get(f'{side}_nll_y'))}), link accuracy {_fmt(m.get(f'{side}_link_accuracy'))}, "
+                f"top-3 {_fmt(m.get(f'{side}_link_top3'))}"
+            )
 
 
 @app.command("models")

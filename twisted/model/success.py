@@ -55,8 +55,15 @@ def held_out_transitions(
     rng: np.random.Generator,
     steps: Sequence[str] = ("0->1", "1->2", "2->3", "+2"),
     max_cross: int = 6,
+    side: str = "held_out",
 ) -> list[HeldOut]:
-    """Up to ``per_step`` held-out transitions of each step kind, drawn uniformly (see module doc)."""
+    """Up to ``per_step`` held-out transitions of each step kind, drawn uniformly (see module doc).
+
+    ``side="train"`` takes the model's training transitions instead (a check that the model can
+    reproduce what it was fitted on), ``side="all"`` every transition.
+    """
+    if side not in ("held_out", "train", "all"):
+        raise ValueError(f"side must be held_out, train or all, got {side!r}")
     params = model.metadata.get("parameters", {})
     max_id = model.metadata.get("max_transition_id")
     with store.session() as session:
@@ -76,6 +83,10 @@ def held_out_transitions(
         in_snapshot = ids <= int(max_id)
         held = ~in_snapshot
         held[val] = True  # the model's validation side inside its snapshot
+    if side == "train":
+        held = ~held
+    elif side == "all":
+        held[:] = True
     chosen: list[int] = []
     for step in steps:
         candidates = np.flatnonzero(held & (names == step))

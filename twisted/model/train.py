@@ -201,8 +201,10 @@ def batch_losses(
 
 
 @torch.no_grad()
-def evaluate(net: InverseNet, data: TransitionData, device: str | torch.device = "cpu") -> dict[str, float]:
-    """Mean validation NLL terms (no augmentation), link accuracy and top-3 accuracy, per sample."""
+def evaluate(
+    net: InverseNet, data: TransitionData, device: str | torch.device = "cpu", prefix: str = "val"
+) -> dict[str, float]:
+    """Mean NLL terms (no augmentation), link accuracy and top-3 accuracy, keys ``<prefix>_...``."""
     net.eval()
     data = data.to(device)
     sums: dict[str, float] = {}
@@ -220,10 +222,10 @@ def evaluate(net: InverseNet, data: TransitionData, device: str | torch.device =
         correct += int((logits.argmax(dim=1) == link).sum())
         top3 += int((logits.topk(3, dim=1).indices == link[:, None]).any(dim=1).sum())
     n = max(len(data), 1)
-    out = {f"val_{k}": v / n for k, v in sums.items()}
-    out["val_link_accuracy"] = correct / n
-    out["val_link_top3"] = top3 / n
-    out["n_val"] = len(data)
+    out = {f"{prefix}_{k}": v / n for k, v in sums.items()}
+    out[f"{prefix}_link_accuracy"] = correct / n
+    out[f"{prefix}_link_top3"] = top3 / n
+    out[f"n_{prefix}"] = len(data)
     return out
 
 
@@ -450,6 +452,11 @@ def train(
     if trainer.best_net is not None:
         trainer.net.load_state_dict(trainer.best_net)  # the epoch with the lowest validation loss
     metrics = evaluate(trainer.net, val_data, trainer.device) if len(val_data) else {}
+    # the same figures on (up to EVAL_BATCH) training samples, to judge over-fitting
+    seen = train_data.subset(np.arange(min(len(train_data), EVAL_BATCH)))
+    metrics.update(
+        {k: v for k, v in evaluate(trainer.net, seen, trainer.device, "train").items() if k != "n_train"}
+    )
     metrics.update(
         {
             "epochs": trainer.epoch,
