@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import func, select, text
 from typer.testing import CliRunner
 
 from cli.main import app
@@ -78,6 +78,16 @@ def test_random_low_finds_a_one_crossing_plan_and_it_replays(db_url: str) -> Non
         assert replayed.reached_goal
         assert all(step.matches for step in replayed.steps)
         assert [step.curve.link for step in replayed.steps] == [row["link"] for row in result["plan"]]
+    # the view search_plan_steps lists the same plan, step 0 being the initial configuration
+    with open_store(db) as store, store.engine.connect() as conn:
+        rows = conn.execute(
+            text("SELECT step, link, state FROM search_plan_steps WHERE run_id = :r ORDER BY step"),
+            {"r": result["run_id"]},
+        ).all()
+    assert [r.step for r in rows] == list(range(len(result["plan"]) + 1))
+    assert rows[0].link is None and rows[0].state == "[]"
+    printed = [(step["link"], step["state"]) for step in result["plan"]]
+    assert [(r.link, json.loads(r.state)) for r in rows[1:]] == printed
     replayed_cli = runner.invoke(app, ["--db", db, "replay", str(result["run_id"]), "--json"])
     assert replayed_cli.exit_code == 0, replayed_cli.output
     assert json.loads(replayed_cli.output)["reached_goal"] is True
@@ -106,8 +116,8 @@ def _search_with_states(states: list[str], heuristic: str, goal: str) -> Twisted
     """A search whose tree holds one node per state (no simulation is needed to select)."""
     q, points, p0 = straight_rope()
     tree = SearchTree()
-    for i, text in enumerate(states):
-        p = parse_p_data(text)
+    for i, state in enumerate(states):
+        p = parse_p_data(state)
         tree.add(Node(i, None if i == 0 else 0, q, points, p, None, 0, 0))
     g = check_goal(goal)
     options = PlannerOptions(heuristic=heuristic, seed=7)
