@@ -393,11 +393,14 @@ def train(
         return elapsed_before + time.monotonic() - started
 
     stopped = False
+    epoch_loss = [0.0, 0]  # sum and count of the batch losses of this epoch (since a resume)
 
     def after_batch(index: torch.Tensor, figures: dict[str, float]) -> bool:
         nonlocal last_checkpoint, stopped
         if on_batch is not None:
             on_batch(index)
+        epoch_loss[0] += figures["loss"]
+        epoch_loss[1] += 1
         if progress is not None:
             progress(
                 Progress(
@@ -405,7 +408,7 @@ def train(
                     config.epochs,
                     trainer.batch_index,
                     trainer.batches_per_epoch,
-                    figures["loss"],
+                    epoch_loss[0] / epoch_loss[1],
                     elapsed(),
                 )
             )
@@ -422,7 +425,11 @@ def train(
             completed = trainer.run_epoch_batches(after_batch)
             if completed:
                 val = evaluate(trainer.net, val_data, trainer.device) if len(val_data) else {}
-                history.append({"epoch": epoch, "elapsed_s": round(elapsed(), 1), **val})
+                mean_loss = epoch_loss[0] / max(epoch_loss[1], 1)
+                history.append(
+                    {"epoch": epoch, "elapsed_s": round(elapsed(), 1), "train_batch_loss": mean_loss, **val}
+                )
+                epoch_loss[:] = [0.0, 0]
                 if val:
                     trainer.note_validation(epoch, val["val_loss"])
                 if progress is not None:
@@ -432,7 +439,7 @@ def train(
                             config.epochs,
                             0,
                             trainer.batches_per_epoch,
-                            math.nan,
+                            mean_loss,
                             elapsed(),
                             val,
                         )
