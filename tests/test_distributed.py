@@ -52,6 +52,15 @@ def committed(url: str) -> tuple[set[tuple], set[tuple]]:
     return transitions, batches
 
 
+def last_seq(url: str) -> dict[int, int]:
+    """The last committed batch seq of each worker."""
+    with open_store(url) as store, store.session() as session:
+        rows = session.execute(
+            select(CollectBatch.worker, func.max(CollectBatch.seq)).group_by(CollectBatch.worker)
+        )
+        return {int(w): int(seq) for w, seq in rows}
+
+
 def collect_worker_pids() -> list[int]:
     """Processes of the CollectWorker actors (Ray names them ``ray::CollectWorker...``)."""
     pids = []
@@ -106,16 +115,18 @@ def test_collect_into_postgres_written_by_the_workers(postgres_url: str) -> None
 def test_killed_worker_is_restarted_and_nothing_is_lost_or_stored_twice(postgres_url: str) -> None:
     killed: list[tuple[int, float]] = []
     snapshot: list[tuple[set[tuple], set[tuple]]] = []
+    seqs_at_kill: list[dict[int, int]] = []
 
     def kill_one(progress: CollectProgress) -> None:
         if not killed and progress.batches >= 3:
             snapshot.append(committed(postgres_url))
+            seqs_at_kill.append(last_seq(postgres_url))
             pid = collect_worker_pids()[0]
             os.kill(pid, signal.SIGKILL)  # mid-batch: no chance to finish or roll back by itself
             killed.append((pid, progress.elapsed_s))
 
     with open_store(postgres_url) as store:
-        options = CollectOptions(hours=30 / 3600, seed=5, batch_size=1, batch_seconds=1.0)
+        options = CollectOptions(hours=16 / 3600, seed=5, batch_size=1, batch_seconds=1.0)
         summary = collect_on_ray(store, options, max_restarts=1, on_progress=kill_one)
     assert killed, "no worker was killed"
     assert summary.status == "finished", summary.message
@@ -125,11 +136,8 @@ def test_killed_worker_is_restarted_and_nothing_is_lost_or_stored_twice(postgres
     assert len(batches_after) > len(batches_before)
     check_collect_rows(postgres_url)
     # Ray restarted the killed actor: both workers committed batches after the kill
-    with open_store(postgres_url) as store, store.session() as session:
-        late = session.execute(
-            select(CollectBatch.worker, func.max(CollectBatch.seq)).group_by(CollectBatch.worker)
-        ).all()
-    assert {w for w, _ in late} == {0, 1}
+    assert last_seq(postgres_url).keys() == {0, 1}
+    assert all(last_seq(postgres_url)[w] > seq for w, seq in seqs_at_kill[0].items())
     assert killed[0][0] not in collect_worker_pids()
 
 
@@ -144,7 +152,7 @@ def test_dead_worker_without_restart_loses_one_batch_and_the_run_goes_on(sqlite_
             killed.append(progress.elapsed_s)
 
     with open_store(sqlite_url) as store:
-        options = CollectOptions(hours=20 / 3600, seed=6, batch_size=1, batch_seconds=1.0)
+        options = CollectOptions(hours=10 / 3600, seed=6, batch_size=1, batch_seconds=1.0)
         summary = collect_on_ray(store, options, max_restarts=0, on_progress=kill_one)
     assert killed
     assert summary.status == "finished"
