@@ -32,6 +32,9 @@ def train_command(
     hidden: int = typer.Option(256, "--hidden", min=8, help="Width of the shared trunk."),
     layers: int = typer.Option(3, "--layers", min=1, help="Layers of the shared trunk."),
     components: int = typer.Option(4, "--components", min=1, help="Gaussians per continuous head."),
+    link_head: str = typer.Option(
+        "pointer", "--link-head", help="pointer (shared per-link scorer) or dense."
+    ),
     val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
     threads: int | None = typer.Option(
@@ -57,6 +60,8 @@ def train_command(
         fail(f"--device must be cpu or cuda, got {device!r}")
     if device.startswith("cuda") and not torch.cuda.is_available():
         fail("--device cuda: no CUDA device is available to torch here; use --device cpu")
+    if link_head not in ("pointer", "dense"):
+        fail(f"--link-head must be pointer or dense, got {link_head!r}")
     if threads is not None:
         torch.set_num_threads(threads)
     config = TrainConfig(
@@ -68,7 +73,7 @@ def train_command(
         val_fraction=val_fraction,
         augment=augment,
         checkpoint_every_s=checkpoint_every_s,
-        net=NetConfig(hidden=hidden, layers=layers, components=components),
+        net=NetConfig(hidden=hidden, layers=layers, components=components, link_head=link_head),
     )
     try:
         store = open_store(db_url(ctx))

@@ -118,8 +118,8 @@ def test_preprocess_is_invariant_to_table_translation_and_rotation(
 def test_crossing_features_agree_with_top(seed: int) -> None:
     pts = random_rope(seed, bend=0.7)
     p = top(pts)
-    pairs, visits = crossing_features(torch.as_tensor(pts, dtype=torch.float64)[None])
-    feats = pairs[0]
+    cx = crossing_features(torch.as_tensor(pts, dtype=torch.float64)[None])
+    feats, visits = cx.pairs[0], cx.visits
     hits = feats[: len(feats) // 2]
     assert int((hits != 0).sum()) == p.cross
     over_signs = sorted(s for _, _, s in p.crossings())
@@ -131,6 +131,11 @@ def test_crossing_features_agree_with_top(seed: int) -> None:
     assert [("O" if o > 0 else "U") for o in slots[:n, 4]] == [v.over for v in p.visits]
     arcs = slots[:n, 1]
     assert bool((arcs[1:] >= arcs[:-1]).all())
+    # per link: antisymmetric over/under matrix, symmetric signs, every visit on exactly one link
+    over, sign, on = cx.per_link[0, :, :21], cx.per_link[0, :, 21:42], cx.per_link[0, :, 42:]
+    assert torch.equal(over, -over.T) and torch.equal(sign, sign.T)
+    assert int((over != 0).sum()) == n
+    assert on.sum(dim=0).tolist() == [1.0] * n + [0.0] * (12 - n)
 
 
 def test_canonical_frame_puts_the_head_to_tail_axis_on_plus_x() -> None:

@@ -31,6 +31,7 @@ __all__ = [
     "CROSSING_DIM",
     "EncodingError",
     "GEOMETRY_DIM",
+    "LINK_TOKEN_DIM",
     "MAX_CROSSINGS",
     "MAX_VISITS",
     "P_DATA_DIM",
@@ -54,6 +55,8 @@ N_PAIRS = len(_PAIR_I)
 CROSSING_DIM = 2 * N_PAIRS  # per pair: crossed * (+1 if the earlier segment is over else -1), crossed * sign
 VISIT_GEOMETRY_DIM = 5 * MAX_VISITS  # per visit slot: present, arc position, x, y, over
 GEOMETRY_DIM = 3 * N_POINTS + CROSSING_DIM + VISIT_GEOMETRY_DIM
+# per link: centre (3), planar direction (2), index / 20, crossing-matrix row (2 x 21), visit slots on it
+LINK_TOKEN_DIM = 3 + 2 + 1 + 2 * N_SEGMENTS + MAX_VISITS
 
 XY_SCALE_M = 0.5 * N_LINKS * 0.04  # half the rope length: canonical points lie in about [-1, 1]
 Z_REST_M = 0.01  # a link lying on the table (its radius)
@@ -90,27 +93,40 @@ def encode_p_data(p: PData) -> npt.NDArray[np.float32]:
 class Preprocessed:
     """The geometric input of a batch in the canonical frame (see the module docstring)."""
 
-    features: torch.Tensor  # (B, GEOMETRY_DIM)
-    link_centres: torch.Tensor  # (B, N_LINKS, 3) normalised canonical centre of each link
+    features: torch.Tensor  # (B, GEOMETRY_DIM) whole-rope features
+    link_tokens: torch.Tensor  # (B, N_LINKS, LINK_TOKEN_DIM) per-link features
     centre: torch.Tensor  # (B, 2) world xy of the canonical origin (m)
     cos: torch.Tensor  # (B,) rotation world -> canonical is by -angle
     sin: torch.Tensor  # (B,)
+
+
+@dataclass
+class Crossings:
+    """Crossings of the projected rope, batched (see :func:`crossing_features`)."""
+
+    pairs: torch.Tensor  # (B, CROSSING_DIM)
+    visits: torch.Tensor  # (B, VISIT_GEOMETRY_DIM)
+    per_link: torch.Tensor  # (B, N_LINKS, 2 * N_LINKS + MAX_VISITS)
 
 
 def _cross2(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def crossing_features(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Crossings of the projected rope, batched: per segment pair (B, CROSSING_DIM), per visit slot.
+def crossing_features(points: torch.Tensor) -> Crossings:
+    """Crossings of the projected rope, batched, by the same test as :func:`twisted.topology.top`.
 
-    Same test as :func:`twisted.topology.top` (half-open segment parameters). Per non-adjacent
-    segment pair: crossed x (+1 if the earlier segment is over else -1), crossed x sign. Per visit
-    slot 1..12, the visits ordered along the rope as P-data numbers them: present, position along
-    the rope / 21, planar location, over (+1) / under (-1); this ties the P-data's visit numbers
-    to places on the rope. Rotation/translation invariant up to the location, so it runs on
-    canonical points.
+    * ``pairs``: per non-adjacent segment pair, crossed x (+1 if the earlier segment is over,
+      else -1) and crossed x sign.
+    * ``visits``: per visit slot 1..12, the visits in the order P-data numbers them: present,
+      position along the rope / 21, planar location, over (+1) / under (-1). This ties the
+      P-data's visit numbers to places on the rope.
+    * ``per_link``: per link (segment) k, its row of the crossing matrix (with every other
+      segment: +1 over / -1 under where they cross, and the sign) and which visit slots lie on it.
+
+    Rotation/translation invariant except the locations, so it runs on canonical points.
     """
+    batch = points.shape[0]
     start = points[:, :-1]
     d = points[:, 1:] - points[:, :-1]
     i = torch.as_tensor(_PAIR_I, device=points.device)
@@ -142,10 +158,19 @@ def crossing_features(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]
     loc2 = torch.cat([loc, loc], dim=1).gather(1, order[..., None].expand(-1, -1, 2))
     over2 = torch.cat([over_f, -over_f], dim=1).gather(1, order)
     p = present.to(points.dtype)
-    visits = torch.stack(
-        [p, torch.where(present, arc, 0.0) / N_LINKS, p * loc2[..., 0], p * loc2[..., 1], p * over2], dim=2
-    )
-    return pairs, visits.flatten(1)
+    arc0 = torch.where(present, arc, 0.0)
+    visits = torch.stack([p, arc0 / N_LINKS, p * loc2[..., 0], p * loc2[..., 1], p * over2], dim=2)
+
+    over_matrix = points.new_zeros(batch, N_SEGMENTS, N_SEGMENTS)
+    sign_matrix = points.new_zeros(batch, N_SEGMENTS, N_SEGMENTS)
+    over_matrix[:, i, j] = hit_f * over_f
+    over_matrix[:, j, i] = -hit_f * over_f
+    sign_matrix[:, i, j] = hit_f * sign
+    sign_matrix[:, j, i] = hit_f * sign
+    segment = arc0.floor().long().clamp(0, N_SEGMENTS - 1)
+    on_segment = torch.nn.functional.one_hot(segment, N_SEGMENTS).to(points.dtype) * p[..., None]
+    per_link = torch.cat([over_matrix, sign_matrix, on_segment.transpose(1, 2)], dim=2)
+    return Crossings(pairs=pairs, visits=visits.flatten(1), per_link=per_link)
 
 
 def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
@@ -161,10 +186,13 @@ def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
     cos, sin = torch.cos(angle), torch.sin(angle)
     xy = rotate(pts[:, :, :2] - centre[:, None], cos[:, None], -sin[:, None])
     canon = torch.cat([xy / XY_SCALE_M, (pts[:, :, 2:] - Z_REST_M) / Z_SCALE_M], dim=2)
-    pairs, visits = crossing_features(canon)
-    features = torch.cat([canon.flatten(1), pairs, visits], dim=1)
-    link_centres = 0.5 * (canon[:, 1:] + canon[:, :-1])
-    return Preprocessed(features=features, link_centres=link_centres, centre=centre, cos=cos, sin=sin)
+    cx = crossing_features(canon)
+    features = torch.cat([canon.flatten(1), cx.pairs, cx.visits], dim=1)
+    direction = canon[:, 1:, :2] - canon[:, :-1, :2]
+    direction = direction / direction.norm(dim=2, keepdim=True).clamp_min(1e-6)
+    index = torch.arange(N_LINKS, dtype=pts.dtype).expand(pts.shape[0], -1)[..., None] / (N_LINKS - 1)
+    link_tokens = torch.cat([0.5 * (canon[:, 1:] + canon[:, :-1]), direction, index, cx.per_link], dim=2)
+    return Preprocessed(features=features, link_tokens=link_tokens, centre=centre, cos=cos, sin=sin)
 
 
 def rotate(xy: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:

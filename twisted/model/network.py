@@ -27,6 +27,7 @@ from torch import nn
 
 from twisted.model.encoding import (
     GEOMETRY_DIM,
+    LINK_TOKEN_DIM,
     P_DATA_DIM,
     Preprocessed,
     curve_to_target,
@@ -43,7 +44,7 @@ __all__ = ["InverseModel", "InverseNet", "LINK_WEIGHT", "NetConfig"]
 LINK_WEIGHT = 10.0  # loss = 10 x NLL(link) + NLL(z) + NLL(x) + NLL(y) (the reference's weighting)
 MAX_REDRAWS = 32
 LOG_STD_MIN, LOG_STD_MAX = -6.0, 1.0
-LINK_DIM = N_LINKS + 3  # one-hot link + its canonical centre
+LINK_DIM = N_LINKS + LINK_TOKEN_DIM  # one-hot link + that link's token
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,9 @@ class NetConfig:
     layers: int = 3
     head_hidden: int = 128
     components: int = 4
+    # "pointer": one scorer shared by the 21 links reads the context and each link's token;
+    # "dense": 21 logits straight from the context
+    link_head: str = "pointer"
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,6 +110,22 @@ class MixtureHead(nn.Module):
         return Mixture(logits, mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX))
 
 
+class LinkScorer(nn.Module):
+    """Logit of each link from the context and that link's token, with weights shared by the links.
+
+    The context part of the first layer is computed once per sample, not once per link.
+    """
+
+    def __init__(self, context_dim: int, hidden: int) -> None:
+        super().__init__()
+        self.from_context = nn.Linear(context_dim, hidden)
+        self.from_token = nn.Linear(LINK_TOKEN_DIM, hidden, bias=False)
+        self.out = nn.Sequential(nn.SiLU(), nn.Linear(hidden, hidden), nn.SiLU(), nn.Linear(hidden, 1))
+
+    def forward(self, ctx: torch.Tensor, tokens: torch.Tensor) -> torch.Tensor:
+        return self.out(self.from_context(ctx)[:, None] + self.from_token(tokens))[..., 0]
+
+
 class InverseNet(nn.Module):
     """The network; inputs are already encoded (see :func:`InverseNet.context`)."""
 
@@ -116,7 +136,12 @@ class InverseNet(nn.Module):
         self.trunk = nn.Sequential(
             _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
         )
-        self.link_head = _mlp([h, config.head_hidden, N_LINKS])
+        if config.link_head == "pointer":
+            self.link_head: nn.Module = LinkScorer(h, config.head_hidden)
+        elif config.link_head == "dense":
+            self.link_head = _mlp([h, config.head_hidden, N_LINKS])
+        else:
+            raise ValueError(f"link_head must be 'pointer' or 'dense', got {config.link_head!r}")
         self.z_head = MixtureHead(h + LINK_DIM, config.head_hidden, config.components)
         self.x_head = MixtureHead(h + LINK_DIM + 1, config.head_hidden, config.components)
         self.y_head = MixtureHead(h + LINK_DIM + 2, config.head_hidden, config.components)
@@ -128,8 +153,13 @@ class InverseNet(nn.Module):
     @staticmethod
     def link_features(pre: Preprocessed, link: torch.Tensor) -> torch.Tensor:
         one_hot = nn.functional.one_hot(link, N_LINKS).to(pre.features.dtype)
-        centre = pre.link_centres[torch.arange(len(link), device=link.device), link]
-        return torch.cat([one_hot, centre], dim=1)
+        token = pre.link_tokens[torch.arange(len(link), device=link.device), link]
+        return torch.cat([one_hot, token], dim=1)
+
+    def _link_logits(self, ctx: torch.Tensor, pre: Preprocessed) -> torch.Tensor:
+        if self.config.link_head == "pointer":
+            return self.link_head(ctx, pre.link_tokens)
+        return self.link_head(ctx)
 
     def losses(
         self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor, curve: torch.Tensor
@@ -138,7 +168,7 @@ class InverseNet(nn.Module):
         link, target = curve_to_target(curve, pre)
         ctx = self.context(pre, p_now, p_next)
         lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
-        nll_link = nn.functional.cross_entropy(self.link_head(ctx), link, reduction="none")
+        nll_link = nn.functional.cross_entropy(self._link_logits(ctx, pre), link, reduction="none")
         nll_z = self.z_head(lf).nll(target[:, 0])
         nll_x = self.x_head(torch.cat([lf, target[:, :1]], dim=1)).nll(target[:, 1])
         nll_y = self.y_head(torch.cat([lf, target[:, :2]], dim=1)).nll(target[:, 2])
@@ -146,7 +176,7 @@ class InverseNet(nn.Module):
         return {"loss": loss, "nll_link": nll_link, "nll_z": nll_z, "nll_x": nll_x, "nll_y": nll_y}
 
     def link_logits(self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor) -> torch.Tensor:
-        return self.link_head(self.context(pre, p_now, p_next))
+        return self._link_logits(self.context(pre, p_now, p_next), pre)
 
     @torch.no_grad()
     def sample(
@@ -154,7 +184,9 @@ class InverseNet(nn.Module):
     ) -> torch.Tensor:
         """Ancestral sampling of one valid world curve (B, 4) float64 per row (see the module docstring)."""
         ctx = self.context(pre, p_now, p_next)
-        link = torch.multinomial(torch.softmax(self.link_head(ctx), dim=1), 1, generator=generator)[:, 0]
+        link = torch.multinomial(torch.softmax(self._link_logits(ctx, pre), dim=1), 1, generator=generator)[
+            :, 0
+        ]
         lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
         target = torch.zeros(len(link), 3)
         target[:, 0] = _sample_within_unit(self.z_head(lf), generator)
@@ -177,7 +209,7 @@ class InverseNet(nn.Module):
 
 def _double(pre: Preprocessed) -> Preprocessed:
     return Preprocessed(
-        pre.features, pre.link_centres, pre.centre.double(), pre.cos.double(), pre.sin.double()
+        pre.features, pre.link_tokens, pre.centre.double(), pre.cos.double(), pre.sin.double()
     )
 
 
@@ -240,7 +272,7 @@ class InverseModel:
         pre_n = Preprocessed(
             *(
                 t.expand(n, *t.shape[1:])
-                for t in (pre.features, pre.link_centres, pre.centre, pre.cos, pre.sin)
+                for t in (pre.features, pre.link_tokens, pre.centre, pre.cos, pre.sin)
             )
         )
         generator = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
