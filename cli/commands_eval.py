@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 from typing import Annotated, Any
@@ -148,8 +149,14 @@ def _eval(
     parallel: int,
     options: dict[str, Any],
     label: str | None,
+    use_ray: bool = False,
+    ray_address: str | None = None,
 ) -> Any:
+    from twisted.distributed import DistributedError, eval_on_ray
     from twisted.evaluate import EvalInputError, run_eval
+
+    # --ray: the same tasks as Ray tasks (twisted/distributed.py)
+    runner = functools.partial(eval_on_ray, address=ray_address) if use_ray else run_eval
 
     columns = (
         TextColumn(f"[bold]{set_name} / {planner} / friction {friction_scale:g}"),
@@ -174,7 +181,7 @@ def _eval(
                 err_console.print(f"goal {outcome.goal_key} seed {outcome.seed} failed: {outcome.message}")
 
         try:
-            summary = run_eval(
+            summary = runner(
                 store,
                 db_url(ctx),
                 set_name,
@@ -189,7 +196,7 @@ def _eval(
                 on_start=on_start,
                 on_outcome=on_outcome,
             )
-        except EvalInputError as exc:
+        except (EvalInputError, DistributedError) as exc:
             fail(str(exc))
         except KeyboardInterrupt:
             err_console.print(
@@ -261,9 +268,26 @@ def eval_command(
     label: str = typer.Option(
         None, "--label", help="Name the results are stored under (default: planner[-heuristic])."
     ),
+    use_ray: bool = typer.Option(
+        False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
+    ),
+    ray_address: str | None = typer.Argument(
+        None,
+        metavar="ADDRESS",
+        help="With --ray: the cluster (host:port, ray://host:10001, auto, local); default: the one "
+        "`ray start` runs here, else a new local one.",
+    ),
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
-    parallel = parallel or _default_parallel()
+    from twisted.distributed import DistributedError, import_ray, resolve_address
+
+    try:
+        ray_address = resolve_address(use_ray, ray_address)
+        if use_ray:
+            import_ray()
+    except DistributedError as exc:
+        fail(str(exc))
+    parallel = parallel or (0 if use_ray else _default_parallel())
     _eval(
         ctx,
         set_name,
@@ -275,6 +299,8 @@ def eval_command(
         parallel,
         _planner_options(heuristic, model_id),
         label,
+        use_ray,
+        ray_address,
     )
 
 

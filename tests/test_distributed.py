@@ -267,3 +267,15 @@ def test_cli_without_ray_installed_says_how_to_install(tmp_path: Path) -> None:
     err = " ".join(result.stderr.split())
     assert result.returncode == 2, result.stderr
     assert "pip install 'twisted-knots[distributed]'" in err
+
+
+def test_cli_eval_with_ray(sqlite_url: str) -> None:
+    _two_goal_set(sqlite_url)
+    args = ("--db", sqlite_url, "eval", "--set", "ones", "--planner", "random-low", "--timeout", "1")
+    result = _cli(*args, "--ray")
+    assert result.exit_code == 0, result.output
+    with open_store(sqlite_url) as store, store.session() as session:
+        rows = session.scalars(select(EvalResult)).all()
+    assert len(rows) == 2 and {r.status for r in rows} <= {"solved", "timeout"}
+    result = _cli(*args, "--ray", "--workers", "3")
+    assert result.exit_code == 2 and "more than the 2 CPUs" in " ".join(result.output.split())
