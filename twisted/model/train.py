@@ -61,6 +61,7 @@ class TrainConfig:
     hours: float | None = None
     batch_size: int = 256
     lr: float = 1e-3
+    weight_decay: float = 0.0  # AdamW's decoupled decay (0: plain Adam, the reference)
     seed: int = 0
     val_fraction: float = 0.1
     augment: bool = True
@@ -101,7 +102,9 @@ class Trainer:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed)  # weight initialisation replays from the seed
             self.net = InverseNet(config.net).to(self.device)
-        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        self.optimizer = torch.optim.AdamW(
+            self.net.parameters(), lr=config.lr, weight_decay=config.weight_decay
+        )
         self.epoch = 0
         self.batch_index = 0  # batches of `epoch` already trained
         # the weights of the epoch with the lowest validation loss: what a finished run stores
