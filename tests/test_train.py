@@ -259,3 +259,17 @@ def test_held_out_transitions_are_the_validation_side_and_newer_ones(tmp_path) -
         assert h.points.shape == (22, 3) and h.p_to.cross > h.p_from.cross
     few = held_out_transitions(store, model, per_step=2, rng=np.random.default_rng(0), steps=steps)
     assert len(few) <= 2 * len(steps)
+
+
+def test_time_budget_stops_early_and_still_stores_a_model(small_store: tuple[str, dict[str, int]]) -> None:
+    url, _ = small_store
+    store = open_store(url)
+    seen: list[int] = []
+    done = train(
+        store, TrainConfig(epochs=50, hours=1e-9, **FAST), on_batch=lambda idx: seen.append(len(idx))
+    )
+    assert done.status == "finished" and done.model_id is not None
+    assert len(seen) == 1  # the budget is checked after every batch
+    with store.session() as session:
+        run = session.get(TrainingRun, done.training_run_id)
+        assert run.status == "finished" and run.epochs_done == 0
