@@ -55,7 +55,8 @@ __all__ = [
 GL_BACKENDS = ("egl", "osmesa")
 ROPE_COLOUR = "#8c510a"
 SIGN_COLOUR = {"+": "#1b7837", "-": "#762a83"}
-_GAP_M = 0.025  # half-length of the break in an under strand, about one link radius + margin
+_GAP_M = 0.014  # half-length of the break in an under strand: the rope radius (0.01 m) plus a margin
+_ZOOM_MARGIN_M = 0.07  # around the crossings when the knot is small against the whole rope
 
 
 @dataclass(frozen=True)
@@ -157,11 +158,13 @@ def _piece(points: npt.NDArray[np.float64], s0: float, s1: float) -> npt.NDArray
 
 
 def draw_knot_diagram(
-    ax: Axes, points: npt.ArrayLike, *, title: str | None = None, label_visits: bool = True
+    ax: Axes, points: npt.ArrayLike, *, title: str | None = None, label_visits: bool = True, zoom: bool = True
 ) -> list[CrossingDrawing]:
     """Draw the rope from above as a knot diagram: gaps at under-crossings, visits numbered.
 
-    Returns the crossings drawn. The head (link-0 tip) is a filled dot, the tail a ring.
+    Returns the crossings drawn. The head (link-0 tip) is a filled dot, the tail a ring. With
+    ``zoom``, a knot much smaller than the rope is shown close up (the rest of the rope runs off
+    the panel).
     """
     pts = np.asarray(points, dtype=np.float64)
     s = _arc_length(pts)
@@ -180,9 +183,16 @@ def draw_knot_diagram(
             ax.plot(piece[:, 0], piece[:, 1], color=ROPE_COLOUR, lw=4, solid_capstyle="round", zorder=2)
     ax.plot(pts[0, 0], pts[0, 1], "o", color="black", ms=8, zorder=4, label="head (link 0)")
     ax.plot(pts[-1, 0], pts[-1, 1], "o", mfc="white", mec="black", ms=8, zorder=4, label="tail (link 20)")
+    span = float(np.ptp(pts[:, :2], axis=0).max()) or 1.0
+    view = None
+    if zoom and crossings:
+        xy = np.array([c.xy for c in crossings])
+        lo, hi = xy.min(axis=0) - _ZOOM_MARGIN_M, xy.max(axis=0) + _ZOOM_MARGIN_M
+        if float((hi - lo).max()) < 0.6 * span:
+            view = (lo, hi)
+            span = float((hi - lo).max())
     if label_visits:
-        span = float(np.ptp(pts[:, :2], axis=0).max()) or 1.0
-        off = max(0.05 * span, 0.03)
+        off = max(0.07 * span, 0.012)
         for c in crossings:
             x, y = c.xy
             ax.plot(x, y, ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
@@ -201,14 +211,34 @@ def draw_knot_diagram(
                     zorder=6,
                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
                 )
-    ax.margins(0.12)
-    ax.set_aspect("equal", adjustable="datalim")  # fill the panel rather than shrink it
+    if view is not None:
+        (x0, y0), (x1, y1) = view
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_aspect("equal", adjustable="box")
+        ax.text(0.01, 0.01, "zoomed on the crossings", transform=ax.transAxes, fontsize=7, color="grey")
+    else:
+        ax.margins(0.12)
+        ax.set_aspect("equal", adjustable="datalim")  # fill the panel rather than shrink it
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.legend(loc="best", fontsize=7, frameon=False)
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(_wrap(title), fontsize=9)
     return crossings
+
+
+def _wrap(text: str, width: int = 70) -> str:
+    """Break long P-data keys between visits so titles fit their panel."""
+    lines = []
+    for line in text.split("\n"):
+        while len(line) > width:
+            cut = line.rfind("],", 0, width)
+            cut = width if cut <= 0 else cut + 2
+            lines.append(line[:cut])
+            line = line[cut:]
+        lines.append(line)
+    return "\n".join(lines)
 
 
 def draw_gauss_diagram(ax: Axes, p_data: PData, *, title: str | None = None) -> None:
