@@ -355,6 +355,13 @@ def test_bad_goals_exit_2(tmp_path: Path, goal: str) -> None:
     assert "goal" in out.lower()
 
 
+def test_goal_limit_is_what_the_model_encodes() -> None:
+    from twisted.model.encoding import MAX_CROSSINGS
+    from twisted.planner import MAX_GOAL_CROSS
+
+    assert MAX_GOAL_CROSS == MAX_CROSSINGS
+
+
 def test_bad_run_ids_and_missing_model_exit_2(tmp_path: Path) -> None:
     db = _db(tmp_path)
     assert _plan(db, "--resume", "42", "--timeout", "1")[0] == 2
