@@ -75,10 +75,10 @@ def _add_transition(
 
 
 @pytest.fixture
-def synthetic(sqlite_url: str):
+def synthetic(db_url: str):
     """12 visited 3-crossing states with frequencies 1..12, plus a 2-crossing state visited 50 times."""
     visited = STATES_3[::40][:12]
-    with open_store(sqlite_url) as store:
+    with open_store(db_url) as store:
         with store.session(write=True) as session:
             run_id = start_run(session, "collect", {}).id
             root_state = get_or_create_state(session, EMPTY)
@@ -167,20 +167,20 @@ def test_goal_file_errors_name_the_entry() -> None:
     assert parse_goal_file(json.dumps({"a": [good]})) == {"a": [ONE]}
 
 
-def test_import_cli_reports_bad_entry_and_stores_nothing(sqlite_url: str, tmp_path: Path) -> None:
+def test_import_cli_reports_bad_entry_and_stores_nothing(db_url: str, tmp_path: Path) -> None:
     runner = CliRunner()
     bad_file = tmp_path / "goals.json"
     bad_file.write_text(json.dumps({"ok": [ONE.to_list()], "broken": [ONE.to_list(), [[1, "O", 3, "+"]]]}))
-    result = runner.invoke(app, ["--db", sqlite_url, "problems", "import", str(bad_file), "--name", "g"])
+    result = runner.invoke(app, ["--db", db_url, "problems", "import", str(bad_file), "--name", "g"])
     assert result.exit_code == 2
     assert "set 'g-broken' entry 1" in result.output
-    listed = runner.invoke(app, ["--db", sqlite_url, "problems", "list"])
+    listed = runner.invoke(app, ["--db", db_url, "problems", "list"])
     assert listed.exit_code == 0 and "g-ok" not in listed.output  # the good set was not stored either
     good_file = tmp_path / "good.json"
     good_file.write_text(json.dumps([ONE.to_list(), ONE_UNDER.to_list()]))
-    result = runner.invoke(app, ["--db", sqlite_url, "problems", "import", str(good_file), "--name", "g"])
+    result = runner.invoke(app, ["--db", db_url, "problems", "import", str(good_file), "--name", "g"])
     assert result.exit_code == 0, result.output
-    listed = runner.invoke(app, ["--db", sqlite_url, "problems", "list", "--show", "g"])
+    listed = runner.invoke(app, ["--db", db_url, "problems", "list", "--show", "g"])
     assert ONE.key in listed.output and ONE_UNDER.key in listed.output
 
 
@@ -190,8 +190,8 @@ def _two_goal_set(store) -> None:
         save_problem_set(session, "ones", problems, source="imported")
 
 
-def test_interrupted_eval_resumes_without_repeating_goals(sqlite_url: str) -> None:
-    with open_store(sqlite_url) as store:
+def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
+    with open_store(db_url) as store:
         _two_goal_set(store)
 
         def interrupt(outcome, summary) -> None:
@@ -199,7 +199,7 @@ def test_interrupted_eval_resumes_without_repeating_goals(sqlite_url: str) -> No
 
         kwargs = {"timeout_s": 1.5, "seeds": [0], "parallel": 1, "workers": 1}
         with pytest.raises(KeyboardInterrupt):
-            run_eval(store, sqlite_url, "ones", "random-low", on_outcome=interrupt, **kwargs)
+            run_eval(store, db_url, "ones", "random-low", on_outcome=interrupt, **kwargs)
         with store.session() as session:
             first = session.scalars(select(EvalResult)).all()
             runs = session.scalars(select(EvalRun)).all()
@@ -207,7 +207,7 @@ def test_interrupted_eval_resumes_without_repeating_goals(sqlite_url: str) -> No
         assert first[0].plan_run_id is not None and first[0].sim_calls is not None
         assert [r.status for r in runs] == ["interrupted"]
 
-        summary = run_eval(store, sqlite_url, "ones", "random-low", **kwargs)
+        summary = run_eval(store, db_url, "ones", "random-low", **kwargs)
         assert summary.already_done == 1
         assert [o.goal_key for o in summary.outcomes] == [ONE_UNDER.key]  # only the missing goal ran
         with store.session() as session:
@@ -222,7 +222,7 @@ def test_interrupted_eval_resumes_without_repeating_goals(sqlite_url: str) -> No
         assert len(plan_runs) == 2  # one planner run per goal, none repeated
 
         # a third invocation has nothing left to do; another seed is new work
-        assert run_eval(store, sqlite_url, "ones", "random-low", **kwargs).outcomes == []
+        assert run_eval(store, db_url, "ones", "random-low", **kwargs).outcomes == []
 
 
 @pytest.mark.slow
@@ -284,9 +284,9 @@ def test_sigint_mid_goal_checkpoints_and_resumes_the_same_planner_run(
             os.killpg(proc.pid, signal.SIGKILL)
 
 
-def test_report_curves_and_table(sqlite_url: str, tmp_path: Path) -> None:
+def test_report_curves_and_table(db_url: str, tmp_path: Path) -> None:
     assert success_curve([1.0, None, 3.0, 2.0], [0.5, 1.0, 2.5, 10.0]).tolist() == [0.0, 0.25, 0.5, 0.75]
-    with open_store(sqlite_url) as store:
+    with open_store(db_url) as store:
         _two_goal_set(store)
         with store.session(write=True) as session:
             record = load_problem_set(session, "ones")
@@ -336,12 +336,12 @@ def test_report_curves_and_table(sqlite_url: str, tmp_path: Path) -> None:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
 
 
-def test_discretisation_control_is_unchanged_and_rounding_is_measured(sqlite_url: str) -> None:
+def test_discretisation_control_is_unchanged_and_rounding_is_measured(db_url: str) -> None:
     from twisted.sim import RopeSim, sample_curve
 
     sim = RopeSim()
     rng = np.random.default_rng(3)
-    with open_store(sqlite_url) as store:
+    with open_store(db_url) as store:
         with store.session(write=True) as session:
             run_id = start_run(session, "collect", {}).id
             root_state = get_or_create_state(session, EMPTY)
@@ -377,7 +377,7 @@ def test_discretisation_control_is_unchanged_and_rounding_is_measured(sqlite_url
         again = run_discretisation(store, n=4, from_cross=None, to_cross=None, workers=1)
         assert {v.variant: v.changed for v in again.variants}["control"] == 1
     with pytest.raises(EvalInputError, match="no stored transitions"):
-        with open_store(sqlite_url) as store:
+        with open_store(db_url) as store:
             run_discretisation(store, n=4, from_cross=5, to_cross=6)
 
 
