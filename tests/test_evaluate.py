@@ -336,7 +336,7 @@ def test_report_curves_and_table(db_url: str, tmp_path: Path) -> None:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
 
 
-def test_discretisation_control_is_unchanged_and_rounding_is_measured(db_url: str) -> None:
+def test_discretisation_control_is_unchanged_and_rounding_is_measured(db_url: str, tmp_path: Path) -> None:
     from twisted.sim import RopeSim, sample_curve
 
     sim = RopeSim()
@@ -376,6 +376,8 @@ def test_discretisation_control_is_unchanged_and_rounding_is_measured(db_url: st
             t.to_state_id = get_or_create_state(session, ONE_UNDER if current == ONE.key else ONE).id
         again = run_discretisation(store, n=4, from_cross=None, to_cross=None, workers=1)
         assert {v.variant: v.changed for v in again.variants}["control"] == 1
+        text = write_report(store, tmp_path / "rep").markdown.read_text()
+        assert f"| {again.run_id} | 4 | any -> any | control | 1 | 1 | 25.0% | 0 |" in text
     with pytest.raises(EvalInputError, match="no stored transitions"):
         with open_store(db_url) as store:
             run_discretisation(store, n=4, from_cross=5, to_cross=6)
