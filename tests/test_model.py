@@ -28,11 +28,14 @@ from twisted.model.encoding import (
     EncodingError,
     crossing_features,
     curve_to_target,
+    encode_new_visits,
     encode_p_data,
+    new_visit_link_features,
+    new_visits,
     preprocess,
     target_to_curve,
 )
-from twisted.model.network import InverseModel, InverseNet, NetConfig
+from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, RopeSim, sample_curve
 from twisted.topology import EMPTY, PData, top
 
@@ -147,6 +150,57 @@ def test_canonical_frame_puts_the_head_to_tail_axis_on_plus_x() -> None:
     assert torch.allclose(canon[:, :2].mean(dim=0), torch.zeros(2), atol=1e-5)
 
 
+def with_tail_loop(p: PData) -> PData:
+    """``p`` plus an R1 loop on its last segment."""
+    return PData.from_crossings([*p.crossings(), (2 * p.cross + 1, 2 * p.cross + 2, 1)])
+
+
+def condition(p_now: list[PData], p_next: list[PData]) -> Condition:
+    return Condition(
+        torch.as_tensor(np.stack([encode_p_data(p) for p in p_now])),
+        torch.as_tensor(np.stack([encode_p_data(p) for p in p_next])),
+        torch.as_tensor(np.stack([encode_new_visits(a, b) for a, b in zip(p_now, p_next, strict=True)])),
+    )
+
+
+# ---- where the new crossings land -----------------------------------------------------------------
+
+
+def test_new_visits_of_an_added_crossing_name_the_segments_of_the_current_state() -> None:
+    one = PData.from_crossings([(1, 2, 1)])  # an R1 loop: visits 1, 2; segments 0 | 1 | 2
+    # a second loop after the first: both new visits land on segment 2 (after visit 2)
+    two = PData.from_crossings([(1, 2, 1), (3, 4, -1)])
+    found = new_visits(one, two)
+    assert found is not None and [(v.position, v.over, v.sign) for v in found] == [
+        (2, "O", "-"),
+        (2, "U", "-"),
+    ]
+    # a crossing between segment 0 (head) and segment 2 (tail end): visits 1 and 4 are new
+    cross = PData.from_crossings([(2, 3, 1), (4, 1, -1)])
+    found = new_visits(one, cross)
+    assert found is not None and [(v.position, v.over) for v in found] == [(0, "U"), (2, "O")]
+    # +2 (R2-like): two crossings at once
+    r2 = PData.from_crossings([(1, 2, 1), (3, 6, 1), (4, 5, -1)])
+    assert new_visits(one, r2) is not None and len(new_visits(one, r2) or []) == 4
+    # a state that does not contain the current one is not aligned
+    changed = PData.from_crossings([(2, 1, 1), (3, 4, -1)])
+    assert new_visits(one, changed) is None
+    assert encode_new_visits(one, changed).sum() == 0 and encode_new_visits(one, two)[0] == 1
+    assert new_visits(EMPTY, one) is not None and all(v.position == 0 for v in new_visits(EMPTY, one) or [])
+
+
+def test_new_visit_link_features_mark_the_links_on_the_landing_segment() -> None:
+    pts = next(r for r in (random_rope(s, bend=0.8) for s in range(100)) if 1 <= top(r).cross <= 4)
+    now = top(pts)
+    # a new R1 loop at the tail end: lands on the last segment (after every current visit)
+    nxt = with_tail_loop(now)
+    pre = preprocess(pts)
+    feats = new_visit_link_features(pre, torch.as_tensor(encode_new_visits(now, nxt))[None])[0]
+    on = feats[:, 0].numpy()
+    last_arc = float(pre.visit_arcs[0, 2 * now.cross - 1])
+    assert on.any() and all(on[k] == (k + 0.5 > last_arc) for k in range(21))
+
+
 # ---- network ---------------------------------------------------------------------------------------
 
 
@@ -155,8 +209,8 @@ def test_losses_have_one_finite_value_per_sample_and_use_the_true_previous_eleme
     net = InverseNet(SMALL)
     pts = torch.as_tensor(np.stack([random_rope(s) for s in range(5)]), dtype=torch.float32)
     pre = preprocess(pts)
-    p_now = torch.as_tensor(np.stack([encode_p_data(top(p.numpy())) for p in pts]))
-    p_next = torch.as_tensor(np.stack([encode_p_data(chain_of_loops(3))] * 5))
+    nows = [top(p.numpy()) for p in pts]
+    cond = condition(nows, [with_tail_loop(n) for n in nows])
     curves = torch.tensor(
         [
             [3, 0.02, 0.1, 0.1],
@@ -166,7 +220,7 @@ def test_losses_have_one_finite_value_per_sample_and_use_the_true_previous_eleme
             [15, 0.01, 0.3, -0.2],
         ]
     )
-    terms = net.losses(pre, p_now, p_next, curves)
+    terms = net.losses(pre, cond, curves)
     for v in terms.values():
         assert v.shape == (5,) and torch.isfinite(v).all()
     assert torch.allclose(
@@ -175,7 +229,7 @@ def test_losses_have_one_finite_value_per_sample_and_use_the_true_previous_eleme
     # teacher forcing: changing the true z changes the x and y terms, not the link term
     other = curves.clone()
     other[:, 1] = 0.06
-    changed = net.losses(pre, p_now, p_next, other)
+    changed = net.losses(pre, cond, other)
     assert torch.allclose(changed["nll_link"], terms["nll_link"])
     assert not torch.allclose(changed["nll_x"], terms["nll_x"])
     assert not torch.allclose(changed["nll_y"], terms["nll_y"])
@@ -184,8 +238,8 @@ def test_losses_have_one_finite_value_per_sample_and_use_the_true_previous_eleme
 def test_loss_gradient_reaches_every_head() -> None:
     net = InverseNet(SMALL)
     pts = torch.as_tensor(random_rope(1), dtype=torch.float32)[None]
-    enc = torch.as_tensor(encode_p_data(EMPTY))[None]
-    net.losses(preprocess(pts), enc, enc, torch.tensor([[4, 0.02, 0.1, -0.1]]))["loss"].sum().backward()
+    cond = condition([EMPTY], [chain_of_loops(1)])
+    net.losses(preprocess(pts), cond, torch.tensor([[4, 0.02, 0.1, -0.1]]))["loss"].sum().backward()
     for name in ("link_head", "z_head", "x_head", "y_head"):
         grads = [p.grad for p in getattr(net, name).parameters()]
         assert all(g is not None and float(g.abs().sum()) > 0 for g in grads), name

@@ -11,7 +11,7 @@ so validation never contains a start configuration seen in training.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +19,7 @@ import torch
 from sqlalchemy import func, select
 
 from twisted.model.augment import VARIANTS, apply_variant_p_data
-from twisted.model.encoding import MAX_CROSSINGS, P_DATA_DIM, encode_p_data
+from twisted.model.encoding import MAX_CROSSINGS, NEW_DIM, P_DATA_DIM, encode_new_visits, encode_p_data
 from twisted.sim import N_POINTS
 from twisted.store.db import Store
 from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
@@ -28,6 +28,7 @@ from twisted.topology import PData, parse_p_data
 __all__ = [
     "NoTrainingDataError",
     "TransitionData",
+    "encode_pairs",
     "encode_states",
     "load_transitions",
     "max_transition_id",
@@ -56,6 +57,8 @@ class TransitionData:
     to_state: torch.Tensor  # (N,) long
     state_enc: torch.Tensor  # (S, 4, P_DATA_DIM)
     state_keys: list[str]
+    pair: torch.Tensor  # (N,) long: index of (from_state, to_state) in pair_enc
+    pair_enc: torch.Tensor  # (P, 4, NEW_DIM): where the new visits land, per symmetry variant
 
     def __len__(self) -> int:
         return len(self.transition_ids)
@@ -73,20 +76,20 @@ class TransitionData:
             to_state=self.to_state[t],
             state_enc=self.state_enc,
             state_keys=self.state_keys,
+            pair=self.pair[t],
+            pair_enc=self.pair_enc,
         )
 
     def to(self, device: torch.device | str) -> TransitionData:
-        return TransitionData(
-            self.transition_ids,
-            self.start_ids,
-            self.from_cross,
-            self.to_cross,
-            self.points.to(device),
-            self.curves.to(device),
-            self.from_state.to(device),
-            self.to_state.to(device),
-            self.state_enc.to(device),
-            self.state_keys,
+        return replace(
+            self,
+            points=self.points.to(device),
+            curves=self.curves.to(device),
+            from_state=self.from_state.to(device),
+            to_state=self.to_state.to(device),
+            state_enc=self.state_enc.to(device),
+            pair=self.pair.to(device),
+            pair_enc=self.pair_enc.to(device),
         )
 
 
@@ -168,8 +171,10 @@ def load_transitions(
             )
         ).all()
     p_by_id = {sid: parse_p_data(p) for sid, p in rows}
-    state_enc = encode_states([p_by_id[sid] for sid in unique_states.tolist()])
+    states = [p_by_id[sid] for sid in unique_states.tolist()]
+    state_enc = encode_states(states)
     inverse = inverse.reshape(-1, 2)
+    pair, pair_enc = encode_pairs(inverse, states)
     return TransitionData(
         transition_ids=ids,
         start_ids=start_ids,
@@ -180,7 +185,9 @@ def load_transitions(
         from_state=torch.as_tensor(inverse[:, 0], dtype=torch.long),
         to_state=torch.as_tensor(inverse[:, 1], dtype=torch.long),
         state_enc=state_enc,
-        state_keys=[p_by_id[sid].key for sid in unique_states.tolist()],
+        state_keys=[p.key for p in states],
+        pair=pair,
+        pair_enc=pair_enc,
     )
 
 
@@ -191,6 +198,19 @@ def encode_states(states: Sequence[PData]) -> torch.Tensor:
         for v in range(len(VARIANTS)):
             out[s, v] = encode_p_data(apply_variant_p_data(p, v))
     return torch.from_numpy(out)
+
+
+def encode_pairs(index: npt.NDArray[np.int64], states: Sequence[PData]) -> tuple[torch.Tensor, torch.Tensor]:
+    """For (N, 2) (from, to) state indices: (N,) pair index and (P, 4, NEW_DIM) new-visit encodings
+    of every distinct pair in the four symmetry variants."""
+    unique, inverse = np.unique(index, axis=0, return_inverse=True)
+    out = np.empty((len(unique), len(VARIANTS), NEW_DIM), dtype=np.float32)
+    for k, (a, b) in enumerate(unique.tolist()):
+        for v in range(len(VARIANTS)):
+            out[k, v] = encode_new_visits(
+                apply_variant_p_data(states[a], v), apply_variant_p_data(states[b], v)
+            )
+    return torch.as_tensor(inverse.reshape(-1), dtype=torch.long), torch.from_numpy(out)
 
 
 def transitions_from_samples(
@@ -204,14 +224,15 @@ def transitions_from_samples(
     keys: dict[str, int] = {}
     states: list[PData] = []
     index = np.empty((len(p_from), 2), dtype=np.int64)
-    for i, pair in enumerate(zip(p_from, p_to, strict=True)):
-        for j, p in enumerate(pair):
+    for i, both in enumerate(zip(p_from, p_to, strict=True)):
+        for j, p in enumerate(both):
             if p.key not in keys:
                 keys[p.key] = len(states)
                 states.append(p)
             index[i, j] = keys[p.key]
     n = len(p_from)
     ids = np.arange(n, dtype=np.int64)
+    pair, pair_enc = encode_pairs(index, states)
     return TransitionData(
         transition_ids=ids,
         start_ids=ids.copy() if start_ids is None else np.asarray(start_ids, dtype=np.int64),
@@ -223,6 +244,8 @@ def transitions_from_samples(
         to_state=torch.as_tensor(index[:, 1]),
         state_enc=encode_states(states),
         state_keys=[p.key for p in states],
+        pair=pair,
+        pair_enc=pair_enc,
     )
 
 

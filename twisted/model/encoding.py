@@ -17,6 +17,7 @@ displacement divided by the range half-width (0.5 m), so it lies in the disc of 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -25,7 +26,7 @@ import numpy.typing as npt
 import torch
 
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, N_POINTS
-from twisted.topology import PData
+from twisted.topology import PData, Visit
 
 __all__ = [
     "CROSSING_DIM",
@@ -34,11 +35,16 @@ __all__ = [
     "LINK_TOKEN_DIM",
     "MAX_CROSSINGS",
     "MAX_VISITS",
+    "NEW_DIM",
+    "NEW_LINK_DIM",
     "P_DATA_DIM",
     "Preprocessed",
     "curve_to_target",
     "curve_valid",
+    "encode_new_visits",
     "encode_p_data",
+    "new_visit_link_features",
+    "new_visits",
     "preprocess",
     "target_to_curve",
 ]
@@ -89,12 +95,86 @@ def encode_p_data(p: PData) -> npt.NDArray[np.float32]:
     return out
 
 
+# ---- where the next state's new crossings go ----------------------------------------------------
+
+MAX_NEW_VISITS = 4  # a +2 step adds two crossings: four visits
+N_STATE_SEGMENTS = MAX_VISITS + 1  # segments between visits of a state, numbered 0..2n
+NEW_VISIT_DIM = 1 + N_STATE_SEGMENTS + 2  # present, segment of the current state (one-hot), over, sign
+NEW_DIM = 1 + MAX_NEW_VISITS * NEW_VISIT_DIM  # + "aligned" flag
+NEW_LINK_DIM = 3 * MAX_NEW_VISITS  # per link: lies on that segment, x over, x sign
+
+
+def _without(p: PData, removed: set[int]) -> PData:
+    """``p`` with the visits at positions ``removed`` (whole crossings) taken out and renumbered."""
+    keep = [v for v in p.visits if v.position not in removed]
+    rank = {v.position: r + 1 for r, v in enumerate(keep)}
+    return PData(tuple(Visit(rank[v.position], v.over, rank[v.partner], v.sign) for v in keep))
+
+
+def new_visits(p_from: PData, p_to: PData) -> list[Visit] | None:
+    """The visits that ``p_to`` adds to ``p_from``, each with ``position`` = the SEGMENT of ``p_from``
+    (0..2n, between its visits) where it lands, or None when ``p_to`` is not ``p_from`` plus new
+    crossings (a move that also changed existing crossings).
+
+    Found by deleting each set of ``Cross(p_to) - Cross(p_from)`` crossings from ``p_to`` and
+    comparing with ``p_from``; the first match (in crossing order) is used.
+    """
+    added = p_to.cross - p_from.cross
+    if added <= 0 or 2 * added > MAX_NEW_VISITS:
+        return None
+    crossings = [(v.position, v.partner) for v in p_to.visits if v.over == "O"]
+    for chosen in itertools.combinations(crossings, added):
+        removed = {q for pair in chosen for q in pair}
+        if _without(p_to, removed) == p_from:
+            out = []
+            for v in p_to.visits:
+                if v.position in removed:
+                    segment = sum(1 for q in range(1, v.position) if q not in removed)
+                    out.append(Visit(segment, v.over, v.partner, v.sign))
+            return out
+    return None
+
+
+def encode_new_visits(p_from: PData, p_to: PData) -> npt.NDArray[np.float32]:
+    """(NEW_DIM,) float32: aligned flag, then per new visit: present, segment one-hot, over, sign."""
+    out = np.zeros(NEW_DIM, dtype=np.float32)
+    found = new_visits(p_from, p_to)
+    if found is None:
+        return out
+    out[0] = 1.0
+    for k, v in enumerate(found):
+        base = 1 + k * NEW_VISIT_DIM
+        out[base] = 1.0
+        out[base + 1 + v.position] = 1.0
+        out[base + 1 + N_STATE_SEGMENTS] = 1.0 if v.over == "O" else -1.0
+        out[base + 2 + N_STATE_SEGMENTS] = 1.0 if v.sign == "+" else -1.0
+    return out
+
+
+def new_visit_link_features(pre: Preprocessed, new: torch.Tensor) -> torch.Tensor:
+    """(B, 21, NEW_LINK_DIM): for each link and new visit, whether the link lies on the segment of
+    the current rope where that visit lands (x its over/under, x its sign).
+
+    A link's segment is the number of current crossing visits before its middle along the rope.
+    """
+    mids = torch.arange(N_LINKS, dtype=pre.visit_arcs.dtype, device=pre.visit_arcs.device) + 0.5
+    link_segment = (pre.visit_arcs[:, None, :] < mids[None, :, None]).sum(dim=2)  # (B, 21); inf never counts
+    slots = new[:, 1:].reshape(len(new), MAX_NEW_VISITS, NEW_VISIT_DIM)
+    present = slots[..., 0]
+    segment = slots[..., 1 : 1 + N_STATE_SEGMENTS].argmax(dim=2)
+    over = slots[..., 1 + N_STATE_SEGMENTS]
+    sign = slots[..., 2 + N_STATE_SEGMENTS]
+    on = (link_segment[:, :, None] == segment[:, None, :]).to(new.dtype) * present[:, None, :]
+    return torch.cat([on, on * over[:, None, :], on * sign[:, None, :]], dim=2)
+
+
 @dataclass
 class Preprocessed:
     """The geometric input of a batch in the canonical frame (see the module docstring)."""
 
     features: torch.Tensor  # (B, GEOMETRY_DIM) whole-rope features
     link_tokens: torch.Tensor  # (B, N_LINKS, LINK_TOKEN_DIM) per-link features
+    visit_arcs: torch.Tensor  # (B, MAX_VISITS) position of each crossing visit along the rope (inf: none)
     centre: torch.Tensor  # (B, 2) world xy of the canonical origin (m)
     cos: torch.Tensor  # (B,) rotation world -> canonical is by -angle
     sin: torch.Tensor  # (B,)
@@ -107,6 +187,7 @@ class Crossings:
     pairs: torch.Tensor  # (B, CROSSING_DIM)
     visits: torch.Tensor  # (B, VISIT_GEOMETRY_DIM)
     per_link: torch.Tensor  # (B, N_LINKS, 2 * N_LINKS + MAX_VISITS)
+    arcs: torch.Tensor  # (B, MAX_VISITS) segment + t of each visit in P-data order, inf when absent
 
 
 def _cross2(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -170,7 +251,7 @@ def crossing_features(points: torch.Tensor) -> Crossings:
     segment = arc0.floor().long().clamp(0, N_SEGMENTS - 1)
     on_segment = torch.nn.functional.one_hot(segment, N_SEGMENTS).to(points.dtype) * p[..., None]
     per_link = torch.cat([over_matrix, sign_matrix, on_segment.transpose(1, 2)], dim=2)
-    return Crossings(pairs=pairs, visits=visits.flatten(1), per_link=per_link)
+    return Crossings(pairs=pairs, visits=visits.flatten(1), per_link=per_link, arcs=arc)
 
 
 def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
@@ -192,7 +273,9 @@ def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
     direction = direction / direction.norm(dim=2, keepdim=True).clamp_min(1e-6)
     index = torch.arange(N_LINKS, dtype=pts.dtype).expand(pts.shape[0], -1)[..., None] / (N_LINKS - 1)
     link_tokens = torch.cat([0.5 * (canon[:, 1:] + canon[:, :-1]), direction, index, cx.per_link], dim=2)
-    return Preprocessed(features=features, link_tokens=link_tokens, centre=centre, cos=cos, sin=sin)
+    return Preprocessed(
+        features=features, link_tokens=link_tokens, visit_arcs=cx.arcs, centre=centre, cos=cos, sin=sin
+    )
 
 
 def rotate(xy: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:

@@ -1,10 +1,15 @@
 """The auto-regressive inverse model p(c | q, s') = p(link) p(z | link) p(x | link, z) p(y | link, z, x).
 
 Every factor is conditioned on a context vector computed from the configuration (canonical link
-points and their crossings, :mod:`twisted.model.encoding`), the CURRENT P-data and the NEXT P-data.
-``link`` is categorical over the 21 links; ``z``, ``x`` and ``y`` are each a small Gaussian
-mixture in the normalised target space. The continuous heads also see the one-hot chosen link and
-that link's canonical position, so they can place the gripper relative to the rope.
+points and their crossings, :mod:`twisted.model.encoding`), the CURRENT P-data, the NEXT P-data
+and, when the next state is the current one plus new crossings, the segments of the current rope
+where the new crossing visits land (:func:`twisted.model.encoding.new_visits`).
+
+``link`` is categorical over the 21 links, scored by one small network shared by all links that
+reads the context and the link's own token (its place, direction, crossings, P-data visits on it,
+and whether a new visit lands on its segment): choosing "the link on segment 3" then does not have
+to be learned separately for every link number. ``z``, ``x`` and ``y`` are each a small Gaussian
+mixture in the normalised target space; their heads also see the chosen link (one-hot and token).
 
 Training uses teacher forcing with the TRUE previous elements of the curve; sampling is ancestral.
 A Gaussian mixture has mass outside the valid ranges; sampling re-draws the out-of-range elements
@@ -17,7 +22,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -28,23 +33,26 @@ from torch import nn
 from twisted.model.encoding import (
     GEOMETRY_DIM,
     LINK_TOKEN_DIM,
+    NEW_DIM,
+    NEW_LINK_DIM,
     P_DATA_DIM,
     Preprocessed,
     curve_to_target,
     curve_valid,
+    encode_new_visits,
     encode_p_data,
+    new_visit_link_features,
     preprocess,
     target_to_curve,
 )
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve
 from twisted.topology import PData, parse_p_data, top
 
-__all__ = ["InverseModel", "InverseNet", "LINK_WEIGHT", "NetConfig"]
+__all__ = ["Condition", "InverseModel", "InverseNet", "LINK_WEIGHT", "NetConfig"]
 
 LINK_WEIGHT = 10.0  # loss = 10 x NLL(link) + NLL(z) + NLL(x) + NLL(y) (the reference's weighting)
 MAX_REDRAWS = 32
 LOG_STD_MIN, LOG_STD_MAX = -6.0, 1.0
-LINK_DIM = N_LINKS + LINK_TOKEN_DIM  # one-hot link + that link's token
 
 
 @dataclass(frozen=True)
@@ -58,6 +66,8 @@ class NetConfig:
     # "pointer": one scorer shared by the 21 links reads the context and each link's token;
     # "dense": 21 logits straight from the context
     link_head: str = "pointer"
+    # condition on where the next state's new crossing visits land on the current rope
+    new_visits: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -110,16 +120,29 @@ class MixtureHead(nn.Module):
         return Mixture(logits, mean, log_std.clamp(LOG_STD_MIN, LOG_STD_MAX))
 
 
+@dataclass
+class Condition:
+    """What a curve is conditioned on, besides the geometry: encoded current and next P-data
+    (B, P_DATA_DIM) and where the next state's new visits land (B, NEW_DIM)."""
+
+    p_now: torch.Tensor
+    p_next: torch.Tensor
+    new: torch.Tensor
+
+    def expand(self, n: int) -> Condition:
+        return Condition(self.p_now.expand(n, -1), self.p_next.expand(n, -1), self.new.expand(n, -1))
+
+
 class LinkScorer(nn.Module):
     """Logit of each link from the context and that link's token, with weights shared by the links.
 
     The context part of the first layer is computed once per sample, not once per link.
     """
 
-    def __init__(self, context_dim: int, hidden: int) -> None:
+    def __init__(self, context_dim: int, token_dim: int, hidden: int) -> None:
         super().__init__()
         self.from_context = nn.Linear(context_dim, hidden)
-        self.from_token = nn.Linear(LINK_TOKEN_DIM, hidden, bias=False)
+        self.from_token = nn.Linear(token_dim, hidden, bias=False)
         self.out = nn.Sequential(nn.SiLU(), nn.Linear(hidden, hidden), nn.SiLU(), nn.Linear(hidden, 1))
 
     def forward(self, ctx: torch.Tensor, tokens: torch.Tensor) -> torch.Tensor:
@@ -127,67 +150,74 @@ class LinkScorer(nn.Module):
 
 
 class InverseNet(nn.Module):
-    """The network; inputs are already encoded (see :func:`InverseNet.context`)."""
+    """The network; inputs are already encoded (:class:`Preprocessed`, :class:`Condition`)."""
 
     def __init__(self, config: NetConfig = NetConfig()) -> None:
         super().__init__()
         self.config = config
         h = config.hidden
+        new_dim = NEW_DIM if config.new_visits else 0
+        self.token_dim = LINK_TOKEN_DIM + (NEW_LINK_DIM if config.new_visits else 0)
         self.trunk = nn.Sequential(
-            _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
+            _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM + new_dim] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
         )
         if config.link_head == "pointer":
-            self.link_head: nn.Module = LinkScorer(h, config.head_hidden)
+            self.link_head: nn.Module = LinkScorer(h, self.token_dim, config.head_hidden)
         elif config.link_head == "dense":
             self.link_head = _mlp([h, config.head_hidden, N_LINKS])
         else:
             raise ValueError(f"link_head must be 'pointer' or 'dense', got {config.link_head!r}")
-        self.z_head = MixtureHead(h + LINK_DIM, config.head_hidden, config.components)
-        self.x_head = MixtureHead(h + LINK_DIM + 1, config.head_hidden, config.components)
-        self.y_head = MixtureHead(h + LINK_DIM + 2, config.head_hidden, config.components)
+        link_dim = N_LINKS + self.token_dim  # one-hot link + that link's token
+        self.z_head = MixtureHead(h + link_dim, config.head_hidden, config.components)
+        self.x_head = MixtureHead(h + link_dim + 1, config.head_hidden, config.components)
+        self.y_head = MixtureHead(h + link_dim + 2, config.head_hidden, config.components)
 
-    def context(self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor) -> torch.Tensor:
-        """(B, hidden) context from geometry and the encoded current and next P-data (B, P_DATA_DIM)."""
-        return self.trunk(torch.cat([pre.features, p_now, p_next], dim=1))
+    def context(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
+        """(B, hidden) context from the geometry and the condition."""
+        parts = [pre.features, cond.p_now, cond.p_next] + ([cond.new] if self.config.new_visits else [])
+        return self.trunk(torch.cat(parts, dim=1))
 
-    @staticmethod
-    def link_features(pre: Preprocessed, link: torch.Tensor) -> torch.Tensor:
-        one_hot = nn.functional.one_hot(link, N_LINKS).to(pre.features.dtype)
-        token = pre.link_tokens[torch.arange(len(link), device=link.device), link]
-        return torch.cat([one_hot, token], dim=1)
+    def tokens(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
+        """(B, 21, token_dim): each link's geometry, and whether the next state's new visits land on it."""
+        if not self.config.new_visits:
+            return pre.link_tokens
+        return torch.cat([pre.link_tokens, new_visit_link_features(pre, cond.new)], dim=2)
 
-    def _link_logits(self, ctx: torch.Tensor, pre: Preprocessed) -> torch.Tensor:
+    def _link_logits(self, ctx: torch.Tensor, tokens: torch.Tensor) -> torch.Tensor:
         if self.config.link_head == "pointer":
-            return self.link_head(ctx, pre.link_tokens)
+            return self.link_head(ctx, tokens)
         return self.link_head(ctx)
 
-    def losses(
-        self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor, curve: torch.Tensor
-    ) -> dict[str, torch.Tensor]:
+    @staticmethod
+    def _link_features(ctx: torch.Tensor, tokens: torch.Tensor, link: torch.Tensor) -> torch.Tensor:
+        one_hot = nn.functional.one_hot(link, N_LINKS).to(ctx.dtype)
+        token = tokens[torch.arange(len(link), device=link.device), link]
+        return torch.cat([ctx, one_hot, token], dim=1)
+
+    def losses(self, pre: Preprocessed, cond: Condition, curve: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-sample NLL terms (B,) with teacher forcing on the TRUE link, z and x of ``curve`` (B, 4)."""
         link, target = curve_to_target(curve, pre)
-        ctx = self.context(pre, p_now, p_next)
-        lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
-        nll_link = nn.functional.cross_entropy(self._link_logits(ctx, pre), link, reduction="none")
+        ctx = self.context(pre, cond)
+        tokens = self.tokens(pre, cond)
+        lf = self._link_features(ctx, tokens, link)
+        nll_link = nn.functional.cross_entropy(self._link_logits(ctx, tokens), link, reduction="none")
         nll_z = self.z_head(lf).nll(target[:, 0])
         nll_x = self.x_head(torch.cat([lf, target[:, :1]], dim=1)).nll(target[:, 1])
         nll_y = self.y_head(torch.cat([lf, target[:, :2]], dim=1)).nll(target[:, 2])
         loss = LINK_WEIGHT * nll_link + nll_z + nll_x + nll_y
         return {"loss": loss, "nll_link": nll_link, "nll_z": nll_z, "nll_x": nll_x, "nll_y": nll_y}
 
-    def link_logits(self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor) -> torch.Tensor:
-        return self._link_logits(self.context(pre, p_now, p_next), pre)
+    def link_logits(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
+        return self._link_logits(self.context(pre, cond), self.tokens(pre, cond))
 
     @torch.no_grad()
-    def sample(
-        self, pre: Preprocessed, p_now: torch.Tensor, p_next: torch.Tensor, generator: torch.Generator | None
-    ) -> torch.Tensor:
+    def sample(self, pre: Preprocessed, cond: Condition, generator: torch.Generator | None) -> torch.Tensor:
         """Ancestral sampling of one valid world curve (B, 4) float64 per row (see the module docstring)."""
-        ctx = self.context(pre, p_now, p_next)
-        link = torch.multinomial(torch.softmax(self._link_logits(ctx, pre), dim=1), 1, generator=generator)[
-            :, 0
-        ]
-        lf = torch.cat([ctx, self.link_features(pre, link)], dim=1)
+        ctx = self.context(pre, cond)
+        tokens = self.tokens(pre, cond)
+        probs = torch.softmax(self._link_logits(ctx, tokens), dim=1)
+        link = torch.multinomial(probs, 1, generator=generator)[:, 0]
+        lf = self._link_features(ctx, tokens, link)
         target = torch.zeros(len(link), 3)
         target[:, 0] = _sample_within_unit(self.z_head(lf), generator)
         # x then y, redrawing both where the rotated-back displacement leaves the box
@@ -208,9 +238,12 @@ class InverseNet(nn.Module):
 
 
 def _double(pre: Preprocessed) -> Preprocessed:
-    return Preprocessed(
-        pre.features, pre.link_tokens, pre.centre.double(), pre.cos.double(), pre.sin.double()
-    )
+    return replace(pre, centre=pre.centre.double(), cos=pre.cos.double(), sin=pre.sin.double())
+
+
+def astuple_shallow(pre: Preprocessed) -> tuple[torch.Tensor, ...]:
+    """The tensors of ``pre`` in field order (dataclasses.astuple would deep-copy them)."""
+    return tuple(getattr(pre, f.name) for f in fields(pre))
 
 
 def _sample_within_unit(mix: Mixture, generator: torch.Generator | None) -> torch.Tensor:
@@ -237,14 +270,22 @@ class InverseModel:
 
     def __post_init__(self) -> None:
         self.net.eval()
-        self._p_cache: dict[str, torch.Tensor] = {}
+        self._cache: dict[tuple[str, str], Condition] = {}
 
-    def _encode(self, p: PData) -> torch.Tensor:
-        enc = self._p_cache.get(p.key)
-        if enc is None:
-            enc = torch.from_numpy(encode_p_data(p))[None]
-            self._p_cache[p.key] = enc
-        return enc
+    def condition(self, p_now: PData, p_next: PData) -> Condition:
+        """The encoded condition (batch of one) for going from ``p_now`` to ``p_next`` (cached)."""
+        key = (p_now.key, p_next.key)
+        cond = self._cache.get(key)
+        if cond is None:
+            cond = Condition(
+                torch.from_numpy(encode_p_data(p_now))[None],
+                torch.from_numpy(encode_p_data(p_next))[None],
+                torch.from_numpy(encode_new_visits(p_now, p_next))[None],
+            )
+            if len(self._cache) > 100_000:
+                self._cache.clear()
+            self._cache[key] = cond
+        return cond
 
     @torch.no_grad()
     def sample(
@@ -268,17 +309,11 @@ class InverseModel:
         pts = np.asarray(points, dtype=np.float64)
         nxt = parse_p_data(next_p_data)
         now = top(pts) if p_data is None else p_data
+        cond = self.condition(now, nxt).expand(n)
         pre = preprocess(pts)
-        pre_n = Preprocessed(
-            *(
-                t.expand(n, *t.shape[1:])
-                for t in (pre.features, pre.link_tokens, pre.centre, pre.cos, pre.sin)
-            )
-        )
+        pre_n = Preprocessed(*(t.expand(n, *t.shape[1:]) for t in astuple_shallow(pre)))
         generator = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
-        curves = self.net.sample(
-            pre_n, self._encode(now).expand(n, -1), self._encode(nxt).expand(n, -1), generator
-        )
+        curves = self.net.sample(pre_n, cond, generator)
         return [Curve.from_array(c) for c in curves.numpy()]
 
     @torch.no_grad()
@@ -288,7 +323,7 @@ class InverseModel:
         """(21,) probability of each link being the one to grasp."""
         pts = np.asarray(points, dtype=np.float64)
         now = top(pts) if p_data is None else p_data
-        logits = self.net.link_logits(preprocess(pts), self._encode(now), self._encode(next_p_data))
+        logits = self.net.link_logits(preprocess(pts), self.condition(now, parse_p_data(next_p_data)))
         return torch.softmax(logits, dim=1)[0].numpy()
 
     def to_bytes(self) -> bytes:

@@ -36,7 +36,7 @@ from twisted.model.data import (
     split_by_start,
 )
 from twisted.model.encoding import preprocess
-from twisted.model.network import InverseModel, InverseNet, NetConfig
+from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig
 from twisted.store.db import Store
 from twisted.store.models import utcnow
 from twisted.store.training import Checkpoint, TrainingRun
@@ -198,9 +198,16 @@ def batch_losses(
 ) -> dict[str, torch.Tensor]:
     """Per-sample loss terms of samples ``index`` of ``data`` with symmetry ``variant`` (B,) applied."""
     points, curves = apply_variant(data.points[index], data.curves[index], variant)
-    p_now = data.state_enc[data.from_state[index], variant]
-    p_next = data.state_enc[data.to_state[index], variant]
-    return net.losses(preprocess(points), p_now, p_next, curves)
+    return net.losses(preprocess(points), batch_condition(data, index, variant), curves)
+
+
+def batch_condition(data: TransitionData, index: torch.Tensor, variant: torch.Tensor) -> Condition:
+    """The encoded condition of samples ``index`` under symmetry ``variant``."""
+    return Condition(
+        p_now=data.state_enc[data.from_state[index], variant],
+        p_next=data.state_enc[data.to_state[index], variant],
+        new=data.pair_enc[data.pair[index], variant],
+    )
 
 
 @torch.no_grad()
@@ -218,9 +225,7 @@ def evaluate(
         for k, v in batch_losses(net, data, index, variant).items():
             sums[k] = sums.get(k, 0.0) + float(v.sum())
         pre = preprocess(data.points[index])
-        logits = net.link_logits(
-            pre, data.state_enc[data.from_state[index], 0], data.state_enc[data.to_state[index], 0]
-        )
+        logits = net.link_logits(pre, batch_condition(data, index, variant))
         link = data.curves[index, 0].round().long()
         correct += int((logits.argmax(dim=1) == link).sum())
         top3 += int((logits.topk(3, dim=1).indices == link[:, None]).any(dim=1).sum())
