@@ -20,6 +20,7 @@ import glob
 import os
 import pwd
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
@@ -182,7 +183,10 @@ class PostgresServer:
 
 
 def main() -> None:
-    """Keep a throwaway server running until Ctrl-C (for trying ``--db postgresql+psycopg://...`` by hand)."""
+    """Keep a throwaway server running until Ctrl-C or SIGTERM (to try ``--db postgresql+psycopg://...``)."""
+    # Also when started in the background (where the shell ignores SIGINT): both signals stop it cleanly.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     with PostgresServer() as server:
         print(server.url, flush=True)
         try:

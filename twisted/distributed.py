@@ -82,7 +82,7 @@ RAY_MISSING = (
 WRITERS = ("auto", "driver", "workers")
 # How long the driver waits, after the deadline, for batches in flight (they last batch_seconds, plus
 # an actor restart when one just died) before it gives up on them.
-FINAL_WAIT_S = 60.0
+FINAL_WAIT_S = 30.0
 
 
 class DistributedError(RuntimeError):
@@ -111,6 +111,14 @@ def ray_cluster(address: str | None = None, *, num_cpus: int | None = None) -> I
         yield ray
         return
     kwargs: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": True}
+    if (
+        address not in (None, "auto", "local")
+        and "RAY_AUTH_MODE" not in os.environ
+        and _auth_token_available()
+    ):
+        # Ray (>= 2.5x) enables token authentication by itself for "auto" but not for an explicit
+        # address: without this, `--ray HEAD:6379` is refused by a cluster that `ray start` secured.
+        os.environ["RAY_AUTH_MODE"] = "token"
     if address in (None, "local"):
         # Only a cluster we start takes these (connecting to one with them is an error in Ray).
         kwargs["include_dashboard"] = False
@@ -122,12 +130,21 @@ def ray_cluster(address: str | None = None, *, num_cpus: int | None = None) -> I
         where = "an existing Ray cluster" if address in (None, "auto") else f"the Ray cluster at {address!r}"
         raise DistributedError(
             f"cannot connect to {where}: {exc}. Start one with `ray start --head` (and `ray start "
-            "--address HEAD:6379` on the other machines), or give no address for a local cluster"
+            "--address HEAD:6379` on the other machines), or give no address for a local cluster; a "
+            "cluster that uses token authentication also needs its token here (~/.ray/auth_token of "
+            "the head, or RAY_AUTH_TOKEN)"
         ) from exc
     try:
         yield ray
     finally:
         ray.shutdown()
+
+
+def _auth_token_available() -> bool:
+    """Whether a Ray authentication token is at hand (environment or ~/.ray/auth_token)."""
+    if os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH"):
+        return True
+    return os.path.exists(os.path.join(os.path.expanduser("~"), ".ray", "auth_token"))
 
 
 def cluster_cpus(ray: Any) -> int:
