@@ -753,14 +753,19 @@ class ResultRow:
     sim_calls: int | None
     frequency: int
     tag: str
+    sim_calls_to_solve: int | None = None  # the simulation that produced the goal node
 
 
 def load_results(session: Any, set_names: Sequence[str] | None = None) -> list[ResultRow]:
-    """Finished results (solved or timed out), with their set and goal."""
+    """Finished results (solved or timed out), with their set, goal and the goal node's simulation."""
+    from twisted.store.search import SearchNode, SearchRunRow
+
     q = (
-        select(EvalResult, ProblemSet.name, Problem.frequency, Problem.tag)
+        select(EvalResult, ProblemSet.name, Problem.frequency, Problem.tag, SearchNode.sim_call)
         .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
         .join(Problem, Problem.id == EvalResult.problem_id)
+        .outerjoin(SearchRunRow, SearchRunRow.run_id == EvalResult.plan_run_id)
+        .outerjoin(SearchNode, SearchNode.id == SearchRunRow.goal_node_id)
         .where(EvalResult.status.in_(FINISHED_STATUSES))
         .order_by(ProblemSet.id, EvalResult.planner, Problem.idx, EvalResult.seed)
     )
@@ -779,8 +784,9 @@ def load_results(session: Any, set_names: Sequence[str] | None = None) -> list[R
             r.sim_calls,
             freq,
             tag,
+            goal_call if r.solved else None,
         )
-        for r, name, freq, tag in session.execute(q)
+        for r, name, freq, tag, goal_call in session.execute(q)
     ]
 
 
@@ -813,20 +819,35 @@ def _plot_curves(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, (ax, ax_calls) = plt.subplots(1, 2, figsize=(12.0, 4.2))
     t_max = max(k[2] for k in groups)
     grid = np.linspace(0.0, t_max, 400)
+    calls_max = max((r.sim_calls or 0) for rows in groups.values() for r in rows) or 1
+    calls_grid = np.linspace(0.0, calls_max, 400)
     for key in sorted(groups):
         rows = groups[key]
         y = success_curve([r.time_to_solve_s if r.solved else None for r in rows], grid)
         n = len(rows)
-        ax.step(grid, y, where="post", label=f"{label(*key)} ({sum(r.solved for r in rows)}/{n})")
+        (line,) = ax.step(grid, y, where="post", label=f"{label(*key)} ({sum(r.solved for r in rows)}/{n})")
+        # Simulator calls do not depend on how busy the machine was, but a run that timed out
+        # only says "not solved within its calls": the curve stops at the fewest such calls.
+        to_solve = [r.sim_calls_to_solve if r.solved else None for r in rows]
+        unsolved_calls = [r.sim_calls for r in rows if not r.solved and r.sim_calls is not None]
+        known = min(unsolved_calls) if unsolved_calls else calls_max
+        keep = calls_grid <= known
+        ax_calls.step(
+            calls_grid[keep], success_curve(to_solve, calls_grid[keep]), where="post", color=line.get_color()
+        )
     ax.set_xlim(0, t_max)
-    ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("fraction solved")
+    ax_calls.set_xlim(0, calls_max)
+    ax_calls.set_xlabel("simulator calls (curve stops where a run timed out)")
+    for a in (ax, ax_calls):
+        a.set_ylim(-0.02, 1.02)
+        a.set_ylabel("fraction solved")
+        a.grid(alpha=0.3)
     ax.set_title(title)
-    ax.grid(alpha=0.3)
+    ax_calls.set_title("the same, against simulator calls")
     ax.legend(fontsize=8, loc="upper left")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120, bbox_inches="tight")
