@@ -36,6 +36,9 @@ def train_command(
     link_head: str = typer.Option(
         "pointer", "--link-head", help="pointer (shared per-link scorer) or dense."
     ),
+    new_visits: bool = typer.Option(
+        True, "--new-visits/--no-new-visits", help="Condition on where the next state's new crossings land."
+    ),
     val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
     threads: int | None = typer.Option(
@@ -75,7 +78,9 @@ def train_command(
         val_fraction=val_fraction,
         augment=augment,
         checkpoint_every_s=checkpoint_every_s,
-        net=NetConfig(hidden=hidden, layers=layers, components=components, link_head=link_head),
+        net=NetConfig(
+            hidden=hidden, layers=layers, components=components, link_head=link_head, new_visits=new_visits
+        ),
     )
     try:
         store = open_store(db_url(ctx))

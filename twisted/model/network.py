@@ -167,7 +167,8 @@ class InverseNet(nn.Module):
             self.link_head = _mlp([h, config.head_hidden, N_LINKS])
         else:
             raise ValueError(f"link_head must be 'pointer' or 'dense', got {config.link_head!r}")
-        link_dim = N_LINKS + self.token_dim  # one-hot link + that link's token
+        # one-hot link, that link's token, every link centre relative to it (where the other strands are)
+        link_dim = N_LINKS + self.token_dim + 2 * N_LINKS
         self.z_head = MixtureHead(h + link_dim, config.head_hidden, config.components)
         self.x_head = MixtureHead(h + link_dim + 1, config.head_hidden, config.components)
         self.y_head = MixtureHead(h + link_dim + 2, config.head_hidden, config.components)
@@ -192,7 +193,8 @@ class InverseNet(nn.Module):
     def _link_features(ctx: torch.Tensor, tokens: torch.Tensor, link: torch.Tensor) -> torch.Tensor:
         one_hot = nn.functional.one_hot(link, N_LINKS).to(ctx.dtype)
         token = tokens[torch.arange(len(link), device=link.device), link]
-        return torch.cat([ctx, one_hot, token], dim=1)
+        relative = tokens[:, :, :2] - token[:, None, :2]  # canonical link centres minus the grasped one
+        return torch.cat([ctx, one_hot, token, relative.flatten(1)], dim=1)
 
     def losses(self, pre: Preprocessed, cond: Condition, curve: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-sample NLL terms (B,) with teacher forcing on the TRUE link, z and x of ``curve`` (B, 4)."""
