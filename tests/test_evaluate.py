@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from twisted.evaluate import (
     EvalInputError,
+    load_results,
     make_problem_sets_in_store,
     parse_goal_file,
     rank_by_frequency,
@@ -221,8 +222,13 @@ def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
         )
         assert len(plan_runs) == 2  # one planner run per goal, none repeated
 
-        # a third invocation has nothing left to do; another seed is new work
+        # a third invocation has nothing left to do
         assert run_eval(store, db_url, "ones", "random-low", **kwargs).outcomes == []
+        with store.session() as session:
+            for r in load_results(session):
+                # the goal node's simulation, read from the planner's tree, for solved goals only
+                assert (r.sim_calls_to_solve is not None) == r.solved
+                assert r.sim_calls_to_solve is None or 1 <= r.sim_calls_to_solve <= r.sim_calls
 
 
 @pytest.mark.slow
