@@ -174,7 +174,9 @@ def test_import_cli_reports_bad_entry_and_stores_nothing(db_url: str, tmp_path: 
     bad_file.write_text(json.dumps({"ok": [ONE.to_list()], "broken": [ONE.to_list(), [[1, "O", 3, "+"]]]}))
     result = runner.invoke(app, ["--db", db_url, "problems", "import", str(bad_file), "--name", "g"])
     assert result.exit_code == 2
-    assert "set 'g-broken' entry 1" in result.output
+    assert "set 'g-broken' entry 1: P-data has 1 visits" in " ".join(
+        result.output.split()
+    )  # rich wraps lines
     listed = runner.invoke(app, ["--db", db_url, "problems", "list"])
     assert listed.exit_code == 0 and "g-ok" not in listed.output  # the good set was not stored either
     good_file = tmp_path / "good.json"
