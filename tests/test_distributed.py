@@ -61,8 +61,19 @@ def last_seq(url: str) -> dict[int, int]:
         return {int(w): int(seq) for w, seq in rows}
 
 
+def _parent(pid: int) -> int:
+    try:
+        return int((Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return 0
+
+
 def collect_worker_pids() -> list[int]:
-    """Processes of the CollectWorker actors (Ray names them ``ray::CollectWorker...``)."""
+    """Processes of this test session's CollectWorker actors (Ray names them ``ray::CollectWorker...``).
+
+    Only descendants of this process (the local cluster's raylet is our child): another session's
+    cluster on the same machine is left alone.
+    """
     pids = []
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -70,8 +81,13 @@ def collect_worker_pids() -> list[int]:
                 cmdline = (entry / "cmdline").read_bytes()
             except OSError:
                 continue
-            if cmdline.startswith(b"ray::CollectWorker"):
-                pids.append(int(entry.name))
+            if not cmdline.startswith(b"ray::CollectWorker"):
+                continue
+            pid = ancestor = int(entry.name)
+            while ancestor > 1 and ancestor != os.getpid():
+                ancestor = _parent(ancestor)
+            if ancestor == os.getpid():
+                pids.append(pid)
     return sorted(pids)
 
 
