@@ -22,7 +22,7 @@ from sqlalchemy.orm import aliased
 from twisted.diagram import diagram
 from twisted.moves import explains, plans, sub_states, successor_states
 from twisted.store import TopologicalState, Transition, open_store
-from twisted.topology import PData, PDataError, Visit, parse_p_data
+from twisted.topology import PData, PDataError, parse_p_data
 
 
 @dataclass
@@ -66,8 +66,13 @@ def r3_slides(p: PData) -> list[PData]:
         perm = list(range(last + 1))
         for k in sides:
             perm[k], perm[k + 1] = k + 1, k
-        moved = sorted(Visit(perm[v.position], v.over, perm[v.partner], v.sign) for v in p.visits)
-        out.append(PData(tuple(moved)))
+        moved = [[perm[v.position], v.over, perm[v.partner], v.sign] for v in p.visits]
+        try:  # sides that share a crossing (adjacent segments) give no valid slide
+            slid = parse_p_data(moved)
+            diagram(slid)
+        except PDataError:
+            continue
+        out.append(slid)
     return out
 
 
