@@ -33,6 +33,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--steps", nargs="+", default=["0->1", "1->2", "2->3", "+2"])
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--oversample", type=int, default=None, help="override the model's sampling setting")
+    ap.add_argument("--link-temperature", type=float, default=None, help="override the model's setting")
     ap.add_argument(
         "--side",
         choices=("held_out", "train", "all"),
@@ -43,13 +45,18 @@ def main() -> None:
 
     store = open_store(args.db)
     model = load_model(None if args.default else store, args.model_id)
+    if args.oversample is not None:
+        model.oversample = args.oversample
+    if args.link_temperature is not None:
+        model.link_temperature = args.link_temperature
     rng = np.random.default_rng(args.seed)
     held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
     meta = model.metadata
     print(
         f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
         f"{meta.get('data_size')} transitions, val metrics {meta.get('metrics', {}).get('val_loss')}; "
-        f"{len(held)} {args.side} transitions from {args.db}"
+        f"{len(held)} {args.side} transitions from {args.db}; sampling: oversample {model.oversample}, "
+        f"link temperature {model.link_temperature}"
     )
     t0 = time.perf_counter()
     with SimPool(args.workers) as pool:

@@ -26,6 +26,7 @@ from twisted.model.encoding import (
     MAX_CROSSINGS,
     P_DATA_DIM,
     EncodingError,
+    Preprocessed,
     crossing_features,
     curve_to_target,
     encode_new_visits,
@@ -35,7 +36,7 @@ from twisted.model.encoding import (
     preprocess,
     target_to_curve,
 )
-from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig
+from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig, astuple_shallow
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, RopeSim, sample_curve
 from twisted.topology import EMPTY, PData, top
 
@@ -266,6 +267,29 @@ def test_sampling_returns_n_valid_curves_and_replays_from_the_seed() -> None:
     assert again.sample(pts, None, chain_of_loops(1), 64, np.random.default_rng(7)) == curves
     probs = model.link_probabilities(pts, chain_of_loops(1))
     assert probs.shape == (N_LINKS,) and abs(probs.sum() - 1) < 1e-5
+
+
+def test_oversampling_keeps_the_most_likely_draws() -> None:
+    torch.manual_seed(3)
+    net = InverseNet(SMALL)
+    pts, nxt = random_rope(5), chain_of_loops(1)
+    plain = InverseModel(net).sample(pts, None, nxt, 6, np.random.default_rng(1))
+    picky = InverseModel(net, metadata={"sampling": {"oversample": 16, "link_temperature": 0.5}})
+    assert (picky.oversample, picky.link_temperature) == (16, 0.5)
+    best = picky.sample(pts, None, nxt, 6, np.random.default_rng(1))
+    assert len(best) == 6
+    _assert_valid(best)
+    assert best == picky.sample(pts, None, nxt, 6, np.random.default_rng(1))
+    pre, cond = preprocess(pts), picky.condition(top(pts), nxt)
+
+    def mean_log_prob(curves: list[Curve]) -> float:
+        batch = torch.as_tensor(np.stack([c.to_array() for c in curves]))
+        expand = Preprocessed(*(t.expand(6, *t.shape[1:]) for t in astuple_shallow(pre)))
+        return float(net.log_prob(expand, cond.expand(6), batch).mean())
+
+    assert mean_log_prob(best) > mean_log_prob(plain)
+    with pytest.raises(ValueError, match="oversample must be >= 1"):
+        InverseModel(net, oversample=0)
 
 
 def test_sampling_stays_in_range_when_the_mixtures_put_their_mass_outside() -> None:

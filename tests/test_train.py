@@ -246,13 +246,16 @@ def test_held_out_transitions_are_the_validation_side_and_newer_ones(tmp_path) -
     train_idx, _ = split_by_start(data.start_ids[snapshot], config.val_fraction, config.seed)
     train_starts = set(data.start_ids[snapshot][train_idx])
     names = np.array([step_name(a, b) for a, b in zip(data.from_cross, data.to_cross, strict=True)])
+    _, val_all = split_by_start(data.start_ids, config.val_fraction, config.seed)
+    val_starts = set(data.start_ids[val_all])
     expected = {
         int(t)
-        for t, start, name, new in zip(data.transition_ids, data.start_ids, names, ~snapshot, strict=True)
-        if name in steps and (new or start not in train_starts)
+        for t, start, name in zip(data.transition_ids, data.start_ids, names, strict=True)
+        if name in steps and (start in val_starts or (t > cut and start not in train_starts))
     }
     assert {h.transition_id for h in held} == expected
     assert any(h.transition_id > cut for h in held) and any(h.transition_id <= cut for h in held)
+    assert all(data.start_ids[data.transition_ids == h.transition_id][0] not in train_starts for h in held)
     by_id = dict(zip(data.transition_ids.tolist(), names, strict=True))
     for h in held:
         assert h.step == by_id[h.transition_id]

@@ -213,11 +213,26 @@ class InverseNet(nn.Module):
         return self._link_logits(self.context(pre, cond), self.tokens(pre, cond))
 
     @torch.no_grad()
-    def sample(self, pre: Preprocessed, cond: Condition, generator: torch.Generator | None) -> torch.Tensor:
-        """Ancestral sampling of one valid world curve (B, 4) float64 per row (see the module docstring)."""
+    def log_prob(self, pre: Preprocessed, cond: Condition, curve: torch.Tensor) -> torch.Tensor:
+        """(B,) joint log-density of world curves (B, 4) in the normalised target space."""
+        terms = self.losses(pre, cond, curve.to(pre.features.dtype))
+        return -(terms["nll_link"] + terms["nll_z"] + terms["nll_x"] + terms["nll_y"])
+
+    @torch.no_grad()
+    def sample(
+        self,
+        pre: Preprocessed,
+        cond: Condition,
+        generator: torch.Generator | None,
+        link_temperature: float = 1.0,
+    ) -> torch.Tensor:
+        """Ancestral sampling of one valid world curve (B, 4) float64 per row (see the module docstring).
+
+        ``link_temperature`` < 1 sharpens the link distribution (logits divided by it).
+        """
         ctx = self.context(pre, cond)
         tokens = self.tokens(pre, cond)
-        probs = torch.softmax(self._link_logits(ctx, tokens), dim=1)
+        probs = torch.softmax(self._link_logits(ctx, tokens) / link_temperature, dim=1)
         link = torch.multinomial(probs, 1, generator=generator)[:, 0]
         lf = self._link_features(ctx, tokens, link)
         target = torch.zeros(len(link), 3)
@@ -269,10 +284,25 @@ class InverseModel:
     net: InverseNet
     metadata: dict[str, Any] = field(default_factory=dict)
     model_id: int | None = None
+    # Sampling: draw `oversample` x n candidates and keep the n most likely under the model (1 =
+    # plain ancestral sampling); link logits divided by `link_temperature`. Defaults come from
+    # metadata["sampling"], so a shipped model carries the settings it was measured with.
+    oversample: int | None = None
+    link_temperature: float | None = None
 
     def __post_init__(self) -> None:
         self.net.eval()
         self._cache: dict[tuple[str, str], Condition] = {}
+        sampling = self.metadata.get("sampling", {})
+        if self.oversample is None:
+            self.oversample = int(sampling.get("oversample", 1))
+        if self.link_temperature is None:
+            self.link_temperature = float(sampling.get("link_temperature", 1.0))
+        if self.oversample < 1 or not self.link_temperature > 0:
+            raise ValueError(
+                "oversample must be >= 1 and link_temperature > 0, "
+                f"got {self.oversample} and {self.link_temperature}"
+            )
 
     def condition(self, p_now: PData, p_next: PData) -> Condition:
         """The encoded condition (batch of one) for going from ``p_now`` to ``p_next`` (cached)."""
@@ -306,16 +336,22 @@ class InverseModel:
         by its link points (capsules are symmetric about their axis; velocities are near zero).
         ``p_data`` is the current state; computed with ``top(points)`` when omitted. Draws come
         from a torch generator seeded from ``rng``, so a seeded ``rng`` replays the same curves.
+        With ``oversample`` > 1 the n most likely of ``oversample * n`` draws are returned.
         """
         del q
         pts = np.asarray(points, dtype=np.float64)
         nxt = parse_p_data(next_p_data)
         now = top(pts) if p_data is None else p_data
-        cond = self.condition(now, nxt).expand(n)
+        assert self.oversample is not None and self.link_temperature is not None
+        m = n * self.oversample
+        cond = self.condition(now, nxt).expand(m)
         pre = preprocess(pts)
-        pre_n = Preprocessed(*(t.expand(n, *t.shape[1:]) for t in astuple_shallow(pre)))
+        pre_m = Preprocessed(*(t.expand(m, *t.shape[1:]) for t in astuple_shallow(pre)))
         generator = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
-        curves = self.net.sample(pre_n, cond, generator)
+        curves = self.net.sample(pre_m, cond, generator, self.link_temperature)
+        if self.oversample > 1:
+            best = self.net.log_prob(pre_m, cond, curves).argsort(descending=True, stable=True)[:n]
+            curves = curves[best]
         return [Curve.from_array(c) for c in curves.numpy()]
 
     @torch.no_grad()

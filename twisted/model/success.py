@@ -6,9 +6,11 @@ each is simulated from ``q`` and the transition counts as solved when any result
 grouped by crossing step: ``0->1``, ``1->2``, ``2->3`` (and deeper ``+1`` steps) and ``+2``.
 
 Held-out means: the validation side of the model's own split (same seed and fraction, by start
-configuration) among the transitions it was trained on, plus every transition newer than its
-data snapshot; a model trained on another database (the shipped default) sees all of them as
-held out only if none of its start configurations are shared, which callers must judge.
+configuration), plus transitions newer than its data snapshot whose start configuration it never
+trained on. A model trained on another database (the shipped default) sees every transition as
+held out; that is only true when the databases share no configurations, which callers must judge.
+Every 0->1 transition starts from the straight rope, one configuration, so 0->1 steps are either
+all trained on or all held out.
 """
 
 from __future__ import annotations
@@ -80,9 +82,12 @@ def held_out_transitions(
     held = np.ones(len(ids), dtype=bool)
     if max_id is not None and "seed" in params:
         _, val = split_by_start(starts, float(params.get("val_fraction", 0.1)), int(params["seed"]))
+        val_side = np.zeros(len(ids), dtype=bool)
+        val_side[val] = True  # the side of the split a start configuration falls on depends on it alone
         in_snapshot = ids <= int(max_id)
-        held = ~in_snapshot
-        held[val] = True  # the model's validation side inside its snapshot
+        training_starts = np.unique(starts[in_snapshot & ~val_side])
+        # the validation side, and newer transitions from start configurations never trained on
+        held = val_side | (~in_snapshot & ~np.isin(starts, training_starts))
     if side == "train":
         held = ~held
     elif side == "all":
