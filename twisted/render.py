@@ -39,7 +39,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Arc, FancyArrowPatch  # noqa: E402
 
-from twisted.topology import PData, Visit  # noqa: E402
+from twisted.topology import PData, Visit, segment_crossings, visit_positions  # noqa: E402
 
 __all__ = [
     "CrossingDrawing",
@@ -85,21 +85,9 @@ def crossing_geometry(points: npt.ArrayLike) -> list[CrossingDrawing]:
     """
     pts = np.asarray(points, dtype=np.float64)
     start, d = pts[:-1], pts[1:] - pts[:-1]
-    i_idx, j_idx = np.triu_indices(len(d), k=2)
-    di, dj = d[i_idx, :2], d[j_idx, :2]
-    w = start[j_idx, :2] - start[i_idx, :2]
-    denom = _cross2(di, dj)
-    ok = np.abs(denom) > 1e-15
-    safe = np.where(ok, denom, 1.0)
-    t = _cross2(w, dj) / safe
-    u = _cross2(w, di) / safe
-    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
-    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
+    i_idx, j_idx, t, u = segment_crossings(pts)
     k = len(i_idx)
-    param = np.concatenate([i_idx + t, j_idx + u])
-    order = np.argsort(param, kind="stable")
-    position = np.empty(2 * k, dtype=np.int64)
-    position[order] = np.arange(1, 2 * k + 1)
+    position = visit_positions(i_idx, j_idx, t, u)
     out = []
     for c in range(k):
         i, j, ti, uj = int(i_idx[c]), int(j_idx[c]), float(t[c]), float(u[c])

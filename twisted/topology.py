@@ -29,8 +29,10 @@ __all__ = [
     "mirror",
     "parse_p_data",
     "reverse",
+    "segment_crossings",
     "top",
     "Top",
+    "visit_positions",
 ]
 
 
@@ -174,6 +176,52 @@ def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArr
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
+def segment_crossings(
+    points: npt.ArrayLike,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Where the projection of a polyline to the table crosses itself: ``(i_idx, j_idx, t, u)``.
+
+    ``points`` has shape (N+1, 3) (not validated here: :func:`top` checks it). Every pair of
+    non-adjacent segments ``i < j - 1`` is tested at once (numpy broadcasting); crossing ``c`` is at
+    ``points[i] + t * (points[i+1] - points[i])`` on segment ``i_idx[c]`` and at parameter ``u`` on
+    segment ``j_idx[c]``. The parameter interval is half-open, ``[0, 1)``, so a crossing exactly at
+    a joint counts once; parallel segments (``|cross| <= 1e-15``) never cross.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    start = pts[:-1]
+    d = pts[1:] - pts[:-1]
+    i_idx, j_idx = np.triu_indices(len(d), k=2)
+    di, dj = d[i_idx, :2], d[j_idx, :2]
+    w = start[j_idx, :2] - start[i_idx, :2]
+    denom = _cross2(di, dj)
+    ok = np.abs(denom) > 1e-15
+    safe = np.where(ok, denom, 1.0)
+    t = _cross2(w, dj) / safe
+    u = _cross2(w, di) / safe
+    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    return i_idx[hit], j_idx[hit], t[hit], u[hit]
+
+
+def visit_positions(
+    i_idx: npt.NDArray[np.int64],
+    j_idx: npt.NDArray[np.int64],
+    t: npt.NDArray[np.float64],
+    u: npt.NDArray[np.float64],
+) -> npt.NDArray[np.int64]:
+    """Visit numbers (1..2k) of the crossings from :func:`segment_crossings`, in walking order.
+
+    The result has length 2k: entry ``c`` is the visit of crossing ``c`` on segment ``i_idx[c]``,
+    entry ``c + k`` its visit on segment ``j_idx[c]``. Visits are ordered by ``segment + t``
+    (stable sort, so equal parameters keep their order).
+    """
+    k = len(i_idx)
+    param = np.concatenate([i_idx + t, j_idx + u])
+    order = np.argsort(param, kind="stable")
+    position = np.empty(2 * k, dtype=np.int64)
+    position[order] = np.arange(1, 2 * k + 1)
+    return position
+
+
 def top(points: npt.ArrayLike) -> PData:
     """``Top(q)``: P-data of a rope given its centreline points, head first, shape (N+1, 3).
 
@@ -188,21 +236,9 @@ def top(points: npt.ArrayLike) -> PData:
         raise ValueError("points contain NaN or infinity")
     start = pts[:-1]
     d = pts[1:] - pts[:-1]
-    n_seg = len(d)
-    i_idx, j_idx = np.triu_indices(n_seg, k=2)
+    i_idx, j_idx, t, u = segment_crossings(pts)
     if len(i_idx) == 0:
         return EMPTY
-    di, dj = d[i_idx, :2], d[j_idx, :2]
-    w = start[j_idx, :2] - start[i_idx, :2]
-    denom = _cross2(di, dj)
-    ok = np.abs(denom) > 1e-15
-    safe = np.where(ok, denom, 1.0)
-    t = _cross2(w, dj) / safe
-    u = _cross2(w, di) / safe
-    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
-    if not np.any(hit):
-        return EMPTY
-    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
     zi = start[i_idx, 2] + t * d[i_idx, 2]
     zj = start[j_idx, 2] + u * d[j_idx, 2]
     i_over = zi >= zj
@@ -210,11 +246,7 @@ def top(points: npt.ArrayLike) -> PData:
     d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
     signs = np.where(_cross2(d_over, d_under) > 0, "+", "-")
     k = len(i_idx)
-    # visit parameter along the rope; visits 0..k-1 are on segment i, k..2k-1 on segment j
-    param = np.concatenate([i_idx + t, j_idx + u])
-    order = np.argsort(param, kind="stable")
-    position = np.empty(2 * k, dtype=np.int64)
-    position[order] = np.arange(1, 2 * k + 1)
+    position = visit_positions(i_idx, j_idx, t, u)
     visits = []
     for c in range(k):
         pi, pj = int(position[c]), int(position[c + k])
