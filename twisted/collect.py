@@ -51,7 +51,7 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from multiprocessing.synchronize import Event
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sqlalchemy import select
@@ -71,7 +71,10 @@ from twisted.store.queries import (
     mark_stale_runs,
     start_run,
 )
-from twisted.topology import EMPTY
+from twisted.topology import EMPTY, PData
+
+if TYPE_CHECKING:  # twisted.sim (MuJoCo) is imported where the simulation runs
+    from twisted.sim import Curve, RopeSim
 
 RUN_KIND = "collect"
 MAX_ENCODED_CROSS = 6  # the inverse model encodes goals of up to 6 crossings
@@ -254,6 +257,49 @@ def _worker_main(spec: _WorkerSpec, out: Any, stop: Event) -> None:
         out.cancel_join_thread()  # nobody reads the queue any more: do not hang on exit
 
 
+def record_curve(
+    tries: dict[int, list[int]],
+    kept: list[KeptTransition],
+    sim: RopeSim,
+    config_id: int,
+    state_id: int,
+    cross: int,
+    curve: Curve,
+    p_data: PData | None,
+    max_cross: int,
+    steps: int,
+) -> None:
+    """Count one simulated random curve and keep its transition when it adds crossings.
+
+    ``tries[cross]`` is ``[tried, kept, rejected]`` for starts with ``cross`` crossings (created on
+    first use). ``p_data is None`` means the simulation failed (rejected). A transition is kept, in
+    ``kept``, when the end state has more crossings than the start and at most ``max_cross``; its
+    end configuration and link points are read from ``sim``, which must still hold the rope as the
+    curve left it. Shared by the local workers and the Ray actors so both count and keep alike.
+    """
+    counts = tries.setdefault(cross, [0, 0, 0])  # tried, kept, rejected
+    counts[0] += 1
+    if p_data is None:
+        counts[2] += 1
+    elif cross < p_data.cross <= max_cross:
+        counts[1] += 1
+        kept.append(
+            KeptTransition(
+                from_configuration_id=config_id,
+                from_state_id=state_id,
+                from_cross=cross,
+                link=curve.link,
+                z_max_m=curve.z_max_m,
+                x_m=curve.x_m,
+                y_m=curve.y_m,
+                q=array_to_blob(sim.state()),
+                points=array_to_blob(sim.link_points()),
+                p_data=p_data,
+                steps=steps,
+            )
+        )
+
+
 def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool], parent: Any) -> None:
     from twisted.sim import RopeSim, sample_curve
 
@@ -317,27 +363,9 @@ def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool
             outcome = sim.apply(curve)
             p_data = sim.p_data() if outcome.ok else None
             sim_seconds += time.perf_counter() - started
-            counts = tries.setdefault(cross, [0, 0, 0])  # tried, kept, rejected
-            counts[0] += 1
-            if p_data is None:
-                counts[2] += 1
-            elif cross < p_data.cross <= options.max_cross:
-                counts[1] += 1
-                kept.append(
-                    KeptTransition(
-                        from_configuration_id=config_id,
-                        from_state_id=state_id,
-                        from_cross=cross,
-                        link=curve.link,
-                        z_max_m=curve.z_max_m,
-                        x_m=curve.x_m,
-                        y_m=curve.y_m,
-                        q=array_to_blob(sim.state()),
-                        points=array_to_blob(sim.link_points()),
-                        p_data=p_data,
-                        steps=outcome.steps,
-                    )
-                )
+            record_curve(
+                tries, kept, sim, config_id, state_id, cross, curve, p_data, options.max_cross, outcome.steps
+            )
             now = time.monotonic()
             if len(kept) >= options.batch_size or now - batch_started >= options.batch_seconds:
                 flush()

@@ -60,10 +60,10 @@ from twisted.collect import (
     DQIndex,
     _stop_on_signals,
     ensure_root,
+    record_curve,
 )
 from twisted.store import CollectBatch, Configuration, Run, Store, Transition, open_store
 from twisted.store.db import sqlite_path
-from twisted.store.models import array_to_blob
 from twisted.store.queries import (
     BatchRecord,
     KeptTransition,
@@ -265,27 +265,9 @@ class CollectWorker:
             outcome = self.sim.apply(curve)
             p_data = self.sim.p_data() if outcome.ok else None
             sim_seconds += time.perf_counter() - t0
-            counts = tries.setdefault(cross, [0, 0, 0])
-            counts[0] += 1
-            if p_data is None:
-                counts[2] += 1
-            elif cross < p_data.cross <= max_cross:
-                counts[1] += 1
-                kept.append(
-                    KeptTransition(
-                        from_configuration_id=config_id,
-                        from_state_id=state_id,
-                        from_cross=cross,
-                        link=curve.link,
-                        z_max_m=curve.z_max_m,
-                        x_m=curve.x_m,
-                        y_m=curve.y_m,
-                        q=array_to_blob(self.sim.state()),
-                        points=array_to_blob(self.sim.link_points()),
-                        p_data=p_data,
-                        steps=outcome.steps,
-                    )
-                )
+            record_curve(
+                tries, kept, self.sim, config_id, state_id, cross, curve, p_data, max_cross, outcome.steps
+            )
         record = BatchRecord(
             batch_id=batch_id(self.run_id, self.worker, seq),
             run_id=self.run_id,
