@@ -553,46 +553,22 @@ def eval_on_ray(
     checkpoint); after that its result row is marked ``interrupted`` so that a rerun picks it up.
     Ctrl-C / SIGTERM cancel the tasks (their planners checkpoint) and mark the eval run interrupted.
     """
-    from twisted.evaluate import (
-        EvalInputError,
-        EvalSummary,
-        TaskOutcome,
-        _pending_tasks,
-        _result_key,
-        run_task,
+    from twisted.evaluate import TaskOutcome, prepare_eval, result_key, run_task
+    from twisted.store.experiments import EvalResult, end_eval_run
+
+    prepared = prepare_eval(
+        store,
+        set_name,
+        planner,
+        timeout_s=timeout_s,
+        seeds=seeds,
+        friction_scale=friction_scale,
+        workers=workers,
+        parallel=parallel,
+        options=options,
+        label=label,
+        min_parallel=0,
     )
-    from twisted.planner import PLANNERS
-    from twisted.store.experiments import EvalResult, end_eval_run, load_problem_set, start_eval_run
-
-    # The checks and preparation of run_eval, in the same order.
-    if planner not in PLANNERS:
-        raise EvalInputError(f"unknown planner {planner!r}: choose from {', '.join(PLANNERS)}")
-    if not (math.isfinite(timeout_s) and timeout_s > 0):
-        raise EvalInputError(f"--timeout must be a positive number of seconds, got {timeout_s}")
-    if not (math.isfinite(friction_scale) and friction_scale > 0):
-        raise EvalInputError(f"--friction-scale must be positive, got {friction_scale}")
-    if workers < 1 or parallel < 0:
-        raise EvalInputError(
-            f"--workers must be at least 1 and --parallel at least 0, got {workers}, {parallel}"
-        )
-    if not seeds:
-        raise EvalInputError("give at least one seed")
-    options = dict(options or {})
-    if label is None:
-        label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
-    if not label or len(label) > 32:
-        raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
-    if planner == "twisted":
-        from twisted.model.registry import ModelError, load_model
-
-        try:  # fail before starting any task when the model cannot be had
-            options["model_id"] = load_model(store, options.get("model_id")).model_id
-        except ModelError as exc:
-            raise EvalInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
-    with store.session() as session:
-        record = load_problem_set(session, set_name)
-    if record is None:
-        raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
     with ray_cluster(address) as ray:
         cpus = cluster_cpus(ray)
         if workers > cpus:
@@ -601,32 +577,8 @@ def eval_on_ray(
                 "takes --workers CPUs)"
             )
         in_flight = parallel or max(1, cpus // workers)
-        with store.session(write=True) as session:
-            eval_run_id = start_eval_run(
-                session,
-                set_id=record.id,
-                planner=label,
-                timeout_s=timeout_s,
-                friction_scale=friction_scale,
-                seeds=seeds,
-                workers=workers,
-                parallel=in_flight,
-                parameters={**options, "planner": planner, "ray": {"address": address, "cpus": cpus}},
-            )
-        with store.session() as session:
-            tasks, done = _pending_tasks(
-                session,
-                record,
-                eval_run_id,
-                planner,
-                label,
-                seeds,
-                timeout_s,
-                friction_scale,
-                workers,
-                options,
-            )
-        summary = EvalSummary(eval_run_id, set_name, label, len(record.problems) * len(seeds), done)
+        summary, tasks = prepared.start(store, in_flight, {"ray": {"address": address, "cpus": cpus}})
+        eval_run_id = summary.eval_run_id
         if on_start is not None:
             on_start(summary, len(tasks))
         gone_errors, task_errors = _ray_errors(ray)
@@ -654,7 +606,7 @@ def eval_on_ray(
                             # the worker died holding the row: free it for a rerun
                             session.execute(
                                 update(EvalResult)
-                                .where(_result_key(task) & (EvalResult.status == "running"))
+                                .where(result_key(task) & (EvalResult.status == "running"))
                                 .values(status="interrupted", message=text)
                             )
                         outcome = TaskOutcome(task.goal_key, task.seed, "failed", message=text)

@@ -81,11 +81,15 @@ __all__ = [
     "DiscretisationSummary",
     "EvalInputError",
     "EvalSummary",
+    "PreparedEval",
     "TaskOutcome",
     "import_problem_sets",
     "make_problem_sets",
     "make_problem_sets_in_store",
     "parse_goal_file",
+    "pending_tasks",
+    "prepare_eval",
+    "result_key",
     "round_curve",
     "run_discretisation",
     "run_eval",
@@ -388,7 +392,8 @@ class EvalSummary:
         return sum(o.status == "solved" for o in self.outcomes)
 
 
-def _result_key(task: EvalTask) -> Any:
+def result_key(task: EvalTask) -> Any:
+    """SQL condition selecting the result row of ``task`` (set, label, goal, seed, timeout, friction)."""
     return (
         (EvalResult.set_id == task.set_id)
         & (EvalResult.planner == task.label)
@@ -404,7 +409,7 @@ def _claim(store: Any, task: EvalTask) -> tuple[int, int | None] | None:
     me = (socket.gethostname(), os.getpid())
     try:
         with store.session(write=True) as session:
-            row = session.scalar(select(EvalResult).where(_result_key(task)))
+            row = session.scalar(select(EvalResult).where(result_key(task)))
             if row is not None:
                 if row.status in FINISHED_STATUSES:
                     return None
@@ -543,19 +548,119 @@ def _task_process(db_url: str, task: EvalTask, queue: Any) -> None:
     queue.put(outcome)
 
 
-def _pending_tasks(
-    session: Any,
-    record: ProblemSetRecord,
-    eval_run_id: int,
+@dataclass(frozen=True)
+class PreparedEval:
+    """The checked inputs of one evaluation (:func:`run_eval`, ``twisted.distributed.eval_on_ray``)."""
+
+    set_name: str
+    planner: str  # the planner kind (a key of ``twisted.planner.PLANNERS``)
+    label: str  # what the results are stored under
+    options: dict[str, Any]  # planner options; ``model_id`` resolved for the twisted planner
+    record: ProblemSetRecord
+    timeout_s: float
+    seeds: Sequence[int]
+    friction_scale: float
+    workers: int
+
+    @property
+    def total(self) -> int:
+        """Number of tasks of the evaluation: goals x seeds."""
+        return len(self.record.problems) * len(self.seeds)
+
+    def start(
+        self, store: Any, parallel: int, parameters: Mapping[str, Any] | None = None
+    ) -> tuple[EvalSummary, list[EvalTask]]:
+        """Store a new ``running`` eval run; its summary and the tasks still to run.
+
+        The run's parameters are the planner options, the planner kind and ``parameters``.
+        """
+        with store.session(write=True) as session:
+            eval_run_id = start_eval_run(
+                session,
+                set_id=self.record.id,
+                planner=self.label,
+                timeout_s=self.timeout_s,
+                friction_scale=self.friction_scale,
+                seeds=self.seeds,
+                workers=self.workers,
+                parallel=parallel,
+                parameters={**self.options, "planner": self.planner, **(parameters or {})},
+            )
+        with store.session() as session:
+            tasks, done = pending_tasks(session, self, eval_run_id)
+        return EvalSummary(eval_run_id, self.set_name, self.label, self.total, done), tasks
+
+
+def prepare_eval(
+    store: Any,
+    set_name: str,
     planner: str,
-    label: str,
-    seeds: Sequence[int],
+    *,
     timeout_s: float,
+    seeds: Sequence[int],
     friction_scale: float,
     workers: int,
-    options: Mapping[str, Any],
-) -> tuple[list[EvalTask], int]:
+    parallel: int,
+    options: Mapping[str, Any] | None,
+    label: str | None,
+    min_parallel: int = 1,
+) -> PreparedEval:
+    """Check an evaluation's inputs, pick its label, load its model id and problem set.
+
+    Raises :class:`EvalInputError` naming the first bad input, before any process or task starts.
+    ``parallel`` must be at least ``min_parallel``: 1 for local processes, 0 on Ray (0 there means
+    as many tasks as the cluster's CPUs allow). The default label is the planner kind, plus
+    ``-<heuristic>`` when ``options`` choose one.
+    """
+    from twisted.planner import PLANNERS
+
+    if planner not in PLANNERS:
+        raise EvalInputError(f"unknown planner {planner!r}: choose from {', '.join(PLANNERS)}")
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise EvalInputError(f"--timeout must be a positive number of seconds, got {timeout_s}")
+    if not (math.isfinite(friction_scale) and friction_scale > 0):
+        raise EvalInputError(f"--friction-scale must be positive, got {friction_scale}")
+    if workers < 1 or parallel < min_parallel:
+        if min_parallel == 1:
+            raise EvalInputError(f"--workers and --parallel must be at least 1, got {workers} and {parallel}")
+        raise EvalInputError(
+            f"--workers must be at least 1 and --parallel at least {min_parallel}, got {workers}, {parallel}"
+        )
+    if not seeds:
+        raise EvalInputError("give at least one seed")
+    options = dict(options or {})
+    if label is None:
+        label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
+    if not label or len(label) > 32:
+        raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
+    if planner == "twisted":
+        from twisted.model.registry import ModelError, load_model
+
+        try:  # fail before starting any process or task when the model cannot be had
+            options["model_id"] = load_model(store, options.get("model_id")).model_id
+        except ModelError as exc:
+            raise EvalInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
+    with store.session() as session:
+        record = load_problem_set(session, set_name)
+    if record is None:
+        raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
+    return PreparedEval(
+        set_name=set_name,
+        planner=planner,
+        label=label,
+        options=options,
+        record=record,
+        timeout_s=timeout_s,
+        seeds=seeds,
+        friction_scale=friction_scale,
+        workers=workers,
+    )
+
+
+def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tuple[list[EvalTask], int]:
     """Tasks still to run (finished ones and ones another live process holds are left out)."""
+    record, planner, label = prepared.record, prepared.planner, prepared.label
+    timeout_s, friction_scale = prepared.timeout_s, prepared.friction_scale
     rows = session.scalars(
         select(EvalResult).where(
             (EvalResult.set_id == record.id)
@@ -566,7 +671,7 @@ def _pending_tasks(
     ).all()
     by_key = {(r.goal_key, r.seed): r for r in rows}
     tasks, done = [], 0
-    for seed in seeds:
+    for seed in prepared.seeds:
         for problem in record.problems:
             row = by_key.get((problem.p_data.key, seed))
             if row is not None and row.status in FINISHED_STATUSES:
@@ -586,8 +691,8 @@ def _pending_tasks(
                     seed=int(seed),
                     timeout_s=float(timeout_s),
                     friction_scale=float(friction_scale),
-                    workers=workers,
-                    options=dict(options),
+                    workers=prepared.workers,
+                    options=dict(prepared.options),
                 )
             )
     return tasks, done
@@ -618,51 +723,20 @@ def run_eval(
     planners checkpoint and the rows become ``interrupted``), and the eval run is marked interrupted;
     running the same command again continues.
     """
-    from twisted.planner import PLANNERS
-
-    if planner not in PLANNERS:
-        raise EvalInputError(f"unknown planner {planner!r}: choose from {', '.join(PLANNERS)}")
-    if not (math.isfinite(timeout_s) and timeout_s > 0):
-        raise EvalInputError(f"--timeout must be a positive number of seconds, got {timeout_s}")
-    if not (math.isfinite(friction_scale) and friction_scale > 0):
-        raise EvalInputError(f"--friction-scale must be positive, got {friction_scale}")
-    if workers < 1 or parallel < 1:
-        raise EvalInputError(f"--workers and --parallel must be at least 1, got {workers} and {parallel}")
-    if not seeds:
-        raise EvalInputError("give at least one seed")
-    options = dict(options or {})
-    if label is None:
-        label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
-    if not label or len(label) > 32:
-        raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
-    if planner == "twisted":
-        from twisted.model.registry import ModelError, load_model
-
-        try:  # fail before starting any process when the model cannot be had
-            options["model_id"] = load_model(store, options.get("model_id")).model_id
-        except ModelError as exc:
-            raise EvalInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
-    with store.session() as session:
-        record = load_problem_set(session, set_name)
-    if record is None:
-        raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
-    with store.session(write=True) as session:
-        eval_run_id = start_eval_run(
-            session,
-            set_id=record.id,
-            planner=label,
-            timeout_s=timeout_s,
-            friction_scale=friction_scale,
-            seeds=seeds,
-            workers=workers,
-            parallel=parallel,
-            parameters={**options, "planner": planner},
-        )
-    with store.session() as session:
-        tasks, done = _pending_tasks(
-            session, record, eval_run_id, planner, label, seeds, timeout_s, friction_scale, workers, options
-        )
-    summary = EvalSummary(eval_run_id, set_name, label, len(record.problems) * len(seeds), done)
+    prepared = prepare_eval(
+        store,
+        set_name,
+        planner,
+        timeout_s=timeout_s,
+        seeds=seeds,
+        friction_scale=friction_scale,
+        workers=workers,
+        parallel=parallel,
+        options=options,
+        label=label,
+    )
+    summary, tasks = prepared.start(store, parallel)
+    eval_run_id = summary.eval_run_id
     if on_start is not None:
         on_start(summary, len(tasks))
 
