@@ -273,7 +273,9 @@ def test_oversampling_keeps_the_most_likely_draws() -> None:
     torch.manual_seed(3)
     net = InverseNet(SMALL)
     pts, nxt = random_rope(5), chain_of_loops(1)
-    plain = InverseModel(net).sample(pts, None, nxt, 6, np.random.default_rng(1))
+    plain = InverseModel(net, oversample=1, link_temperature=1.0).sample(
+        pts, None, nxt, 6, np.random.default_rng(1)
+    )
     picky = InverseModel(net, metadata={"sampling": {"oversample": 16, "link_temperature": 0.5}})
     assert (picky.oversample, picky.link_temperature) == (16, 0.5)
     best = picky.sample(pts, None, nxt, 6, np.random.default_rng(1))

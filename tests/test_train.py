@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from collections.abc import Iterator
 
 import numpy as np
@@ -20,7 +21,7 @@ from twisted.model.train import TrainConfig, train
 from twisted.sim import sample_curve
 from twisted.store import Configuration, Transition, open_store
 from twisted.store.queries import add_configuration, start_run
-from twisted.store.training import Checkpoint, TrainingRun
+from twisted.store.training import Checkpoint, TrainedModel, TrainingRun
 from twisted.topology import top
 
 
@@ -192,7 +193,18 @@ def test_finished_model_is_stored_listed_and_loaded_newest_first(
     assert load_model(store, first.model_id).model_id == first.model_id
     with pytest.raises(ModelError, match="no model 999"):
         load_model(store, 999)
-    curves = newest.sample(random_rope(1), None, top(random_rope(2, bend=0.9)), 6, np.random.default_rng(0))
+    # a model stored by an incompatible version is refused with what to do
+    blob = torch.load(io.BytesIO(newest.to_bytes()), weights_only=True)
+    blob["format_version"] = 999
+    buffer = io.BytesIO()
+    torch.save(blob, buffer)
+    with store.session(write=True) as session:
+        session.get(TrainedModel, second.model_id).weights = buffer.getvalue()
+    with pytest.raises(ModelError, match="format 999.*train a new one"):
+        load_model(store)
+    curves = load_model(store, first.model_id).sample(
+        random_rope(1), None, top(random_rope(2, bend=0.9)), 6, np.random.default_rng(0)
+    )
     assert len(curves) == 6
 
 

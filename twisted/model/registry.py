@@ -98,7 +98,14 @@ def load_default_model() -> InverseModel:
             f"no trained model: the database holds none and the shipped default {path} is missing; "
             "train one with `twisted train`"
         )
-    return InverseModel.from_bytes(path.read_bytes())
+    return _from_bytes(path.read_bytes(), None, f"the shipped default {path}")
+
+
+def _from_bytes(data: bytes, model_id: int | None, what: str) -> InverseModel:
+    try:
+        return InverseModel.from_bytes(data, model_id=model_id)
+    except (ValueError, RuntimeError, KeyError) as exc:
+        raise ModelError(f"{what} cannot be loaded: {exc}") from exc
 
 
 def load_model(store: Store | None = None, model_id: int | None = None) -> InverseModel:
@@ -116,7 +123,7 @@ def load_model(store: Store | None = None, model_id: int | None = None) -> Inver
             else:
                 row = session.scalars(select(TrainedModel).order_by(TrainedModel.id.desc())).first()
             if row is not None:
-                return InverseModel.from_bytes(row.weights, model_id=row.id)
+                return _from_bytes(row.weights, row.id, f"model {row.id} of the database")
     elif model_id is not None:
         raise ModelError(f"model {model_id} was asked for but no database was given")
     return load_default_model()
