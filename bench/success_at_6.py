@@ -27,6 +27,7 @@ def main() -> None:
     ap.add_argument("--db", required=True, help="store with transitions (and the model, unless --default)")
     ap.add_argument("--model-id", type=int, default=None, help="model id in the store (default: newest)")
     ap.add_argument("--default", action="store_true", help="evaluate the shipped default model")
+    ap.add_argument("--model-file", help="evaluate the model saved in this file (torch.save bytes)")
     ap.add_argument("--per-step", type=int, default=60)
     ap.add_argument("--k", type=int, default=6)
     ap.add_argument("--workers", type=int, default=2)
@@ -44,7 +45,14 @@ def main() -> None:
     args = ap.parse_args()
 
     store = open_store(args.db)
-    model = load_model(None if args.default else store, args.model_id)
+    if args.model_file:
+        from pathlib import Path
+
+        from twisted.model.network import InverseModel
+
+        model = InverseModel.from_bytes(Path(args.model_file).read_bytes())
+    else:
+        model = load_model(None if args.default else store, args.model_id)
     if args.oversample is not None:
         model.oversample = args.oversample
     if args.link_temperature is not None:
