@@ -116,12 +116,18 @@ def held_out_transitions(
 
 @dataclass
 class StepResult:
-    """success@k per step kind: ``solved_model`` / ``solved_random`` out of ``n``."""
+    """success@k per step kind: ``solved_model`` / ``solved_random`` out of ``n``.
+
+    ``random_expected`` is the random baseline with less noise: each transition's per-curve hit
+    rate p is estimated from all its random curves, and success@k = mean(1 - (1 - p)^k).
+    """
 
     step: str
-    n: int
-    solved_model: int
-    solved_random: int
+    n: int = 0
+    solved_model: int = 0
+    solved_random: int = 0
+    random_expected_sum: float = 0.0
+    random_curves: int = 0
 
     @property
     def model_rate(self) -> float:
@@ -131,6 +137,10 @@ class StepResult:
     def random_rate(self) -> float:
         return self.solved_random / self.n if self.n else float("nan")
 
+    @property
+    def random_expected(self) -> float:
+        return self.random_expected_sum / self.n if self.n else float("nan")
+
 
 def success_at_k(
     model: InverseModel,
@@ -138,24 +148,29 @@ def success_at_k(
     pool: SimPool,
     rng: np.random.Generator,
     k: int = 6,
+    random_curves: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, StepResult]:
-    """Simulate ``k`` model curves and ``k`` random curves per transition; solved = any reaches ``p_to``."""
+    """Simulate ``k`` model curves and ``random_curves`` (default ``k``, at least ``k``) random curves
+    per transition; solved = any of the k reaches ``p_to`` (the first k random curves for random)."""
+    r = max(k, random_curves or k)
     jobs: list[tuple[npt.NDArray[np.float64], Curve]] = []
     for t in transitions:
         jobs += [(t.q, c) for c in model.sample(t.points, t.q, t.p_to, k, rng, p_data=t.p_from)]
-        jobs += [(t.q, sample_curve(rng)) for _ in range(k)]
+        jobs += [(t.q, sample_curve(rng)) for _ in range(r)]
     results = []
-    for i, r in enumerate(pool.imap(jobs)):
-        results.append(r)
+    for i, res in enumerate(pool.imap(jobs)):
+        results.append(res)
         if progress is not None and (i + 1) % k == 0:
             progress(i + 1, len(jobs))
     out: dict[str, StepResult] = {}
     for n, t in enumerate(transitions):
-        block = results[2 * k * n : 2 * k * (n + 1)]
-        hit = [r.ok and r.p_data == t.p_to for r in block]
-        res = out.setdefault(t.step, StepResult(t.step, 0, 0, 0))
-        res.n += 1
-        res.solved_model += any(hit[:k])
-        res.solved_random += any(hit[k:])
+        block = results[(k + r) * n : (k + r) * (n + 1)]
+        hit = [res.ok and res.p_data == t.p_to for res in block]
+        step = out.setdefault(t.step, StepResult(t.step, random_curves=r))
+        step.n += 1
+        step.solved_model += any(hit[:k])
+        step.solved_random += any(hit[k : 2 * k])
+        p = sum(hit[k:]) / r
+        step.random_expected_sum += 1.0 - (1.0 - p) ** k
     return out
