@@ -70,7 +70,9 @@ def random_rope(seed: int) -> np.ndarray:
     dx=st.floats(-3, 3),
     dy=st.floats(-3, 3),
 )
-def test_invariant_under_translation_and_rotation_about_z(seed: int, angle: float, dx: float, dy: float) -> None:
+def test_invariant_under_translation_and_rotation_about_z(
+    seed: int, angle: float, dx: float, dy: float
+) -> None:
     pts = random_rope(seed)
     c, s = math.cos(angle), math.sin(angle)
     moved = pts.copy()

@@ -109,11 +109,15 @@ EMPTY = PData(())
 
 def _validate(entries: Sequence[Any]) -> PData:
     if not isinstance(entries, (list, tuple)):
-        raise PDataError(f"P-data must be a JSON list of [position, O|U, partner, +|-], got {type(entries).__name__}")
+        raise PDataError(
+            f"P-data must be a JSON list of [position, O|U, partner, +|-], got {type(entries).__name__}"
+        )
     visits: list[Visit] = []
     for i, entry in enumerate(entries):
         if not isinstance(entry, (list, tuple)) or len(entry) != 4:
-            raise PDataError(f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {entry!r}")
+            raise PDataError(
+                f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {entry!r}"
+            )
         pos, over, partner, sign = entry
         for name, value in (("position", pos), ("partner", partner)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
@@ -138,10 +142,13 @@ def _validate(entries: Sequence[Any]) -> PData:
         w = visits[v.partner - 1]
         if w.partner != v.position:
             raise PDataError(
-                f"position {v.position}: partner {v.partner} names {w.partner} as its partner, not {v.position}"
+                f"position {v.position}: partner {v.partner} names {w.partner} as its partner, "
+                f"not {v.position}"
             )
         if w.over == v.over:
-            raise PDataError(f"positions {v.position} and {v.partner}: both are {v.over!r}; one must be O, one U")
+            raise PDataError(
+                f"positions {v.position} and {v.partner}: both are {v.over!r}; one must be O, one U"
+            )
         if w.sign != v.sign:
             raise PDataError(f"positions {v.position} and {v.partner}: signs differ ({v.sign} vs {w.sign})")
     return PData(tuple(visits))
@@ -155,7 +162,9 @@ def parse_p_data(value: str | Sequence[Any] | PData) -> PData:
         try:
             value = json.loads(value)
         except json.JSONDecodeError as exc:
-            raise PDataError(f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {value!r}") from None
+            raise PDataError(
+                f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {value!r}"
+            ) from None
     return _validate(value)  # type: ignore[arg-type]
 
 
