@@ -259,7 +259,14 @@ def test_sigint_mid_goal_checkpoints_and_resumes_the_same_planner_run(
     ]
     cmd += ["--timeout", "12", "--parallel", "1"]
     proc = subprocess.Popen(
-        cmd, cwd=tmp_path, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        cmd,
+        cwd=tmp_path,
+        start_new_session=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        # a shell's background job (e.g. CI started with `&`) inherits SIGINT ignored, and Python keeps
+        # ignoring it: give the child the default disposition so that Ctrl-C reaches it as in a terminal
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         deadline = time.monotonic() + 60
