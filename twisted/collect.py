@@ -257,6 +257,26 @@ def _worker_main(spec: _WorkerSpec, out: Any, stop: Event) -> None:
         out.cancel_join_thread()  # nobody reads the queue any more: do not hang on exit
 
 
+def make_batch(
+    run_id: int,
+    worker: int,
+    seq: int,
+    tries: dict[int, list[int]],
+    kept: list[KeptTransition],
+    sim_seconds: float,
+) -> BatchRecord:
+    """The batch ``seq`` of a worker from its per-crossing try counts and kept transitions."""
+    return BatchRecord(
+        batch_id=batch_id(run_id, worker, seq),
+        run_id=run_id,
+        worker=worker,
+        seq=seq,
+        tries={c: TryCount(*counts) for c, counts in tries.items()},
+        transitions=tuple(kept),
+        sim_seconds=sim_seconds,
+    )
+
+
 def record_curve(
     tries: dict[int, list[int]],
     kept: list[KeptTransition],
@@ -336,15 +356,7 @@ def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool
     def flush() -> None:
         nonlocal seq, tries, kept, sim_seconds, batch_started
         if tries:
-            record = BatchRecord(
-                batch_id=batch_id(spec.run_id, spec.worker, seq),
-                run_id=spec.run_id,
-                worker=spec.worker,
-                seq=seq,
-                tries={c: TryCount(*counts) for c, counts in tries.items()},
-                transitions=tuple(kept),
-                sim_seconds=sim_seconds,
-            )
+            record = make_batch(spec.run_id, spec.worker, seq, tries, kept, sim_seconds)
             out.put(("batch", spec.worker, record))
             seq += 1
         tries, kept, sim_seconds = {}, [], 0.0

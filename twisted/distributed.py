@@ -60,6 +60,7 @@ from twisted.collect import (
     DQIndex,
     _stop_on_signals,
     ensure_root,
+    make_batch,
     record_curve,
 )
 from twisted.store import CollectBatch, Configuration, Run, Store, Transition, open_store
@@ -67,7 +68,6 @@ from twisted.store.db import sqlite_path
 from twisted.store.queries import (
     BatchRecord,
     KeptTransition,
-    TryCount,
     add_collect_batch,
     batch_id,
     configuration_index,
@@ -268,15 +268,7 @@ class CollectWorker:
             record_curve(
                 tries, kept, self.sim, config_id, state_id, cross, curve, p_data, max_cross, outcome.steps
             )
-        record = BatchRecord(
-            batch_id=batch_id(self.run_id, self.worker, seq),
-            run_id=self.run_id,
-            worker=self.worker,
-            seq=seq,
-            tries={c: TryCount(*n) for c, n in tries.items()},
-            transitions=tuple(kept),
-            sim_seconds=sim_seconds,
-        )
+        record = make_batch(self.run_id, self.worker, seq, tries, kept, sim_seconds)
         host, pid = self.location()
         report = BatchReport(
             record.batch_id,
