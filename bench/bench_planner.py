@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions, check_goal, start_search
+from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions, check_goal, curve_sampler, start_search
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.topology import PData
@@ -56,19 +56,6 @@ def _goals(args: argparse.Namespace, store: Any) -> list[tuple[str, PData]]:
     return goals
 
 
-def _sampler(store: Any, planner: str, model_id: int | None) -> tuple[Any, Any]:
-    if planner != "twisted":
-        return None, None
-    import torch
-
-    from twisted.model.registry import load_model
-    from twisted.planner import ModelCurves
-
-    torch.set_num_threads(1)  # the simulator workers own the cores
-    model = load_model(store, model_id)
-    return ModelCurves(model), model.model_id
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -88,10 +75,10 @@ def main() -> None:
 
     store = open_store(args.db)
     goals = _goals(args, store)
-    sampler, model_id = _sampler(store, args.planner, args.model)
+    sampler, model_id = curve_sampler(store, args.planner, args.model)
     print(
         f"# planner={args.planner} heuristic={args.heuristic} timeout={args.timeout:.0f}s "
-        f"workers={args.workers} seed={args.seed} model={model_id if args.planner == 'twisted' else '-'} "
+        f"workers={args.workers} seed={args.seed} model={model_id if model_id is not None else '-'} "
         f"goals={len(goals)} db={args.db}"
     )
     print(

@@ -32,25 +32,6 @@ def _curve_row(curve: Any) -> dict[str, Any]:
     return {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
 
 
-def _sampler(store: Any, planner: str, model_id: int | None) -> tuple[Any, int | None]:
-    """The curve sampler of ``planner`` and the id of the model it uses (None: none, or the shipped one)."""
-    from twisted.planner import ModelCurves
-
-    if planner != "twisted":
-        return None, None
-    import torch
-
-    from twisted.model.registry import ModelError, load_model
-
-    # the simulator workers own the cores; a second torch thread on a busy machine only slows sampling
-    torch.set_num_threads(1)
-    try:
-        model = load_model(store, model_id)
-    except ModelError as exc:
-        fail(f"{exc} (or use --planner random-low, which needs no model)")
-    return ModelCurves(model), model.model_id
-
-
 def _options(
     *,
     planner: str | None,
@@ -97,12 +78,23 @@ def plan_command(
     goal: str | None = typer.Option(
         None, "--goal", help='Goal P-data as JSON, e.g. \'[[1,"O",2,"+"],[2,"U",1,"+"]]\'.'
     ),
+    knot: str | None = typer.Option(
+        None,
+        "--knot",
+        help="Goal by knot name (overhand, figure-eight, 5_1, 5_2; see `twisted knots list`): "
+        "any rope state that ties it.",
+    ),
+    crossings: int | None = typer.Option(
+        None, "--crossings", help="With --knot: states of this many crossings (default: the fewest)."
+    ),
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time limit in seconds (a resumed run's time counts)."
     ),
     heuristic: str | None = typer.Option(None, "--heuristic", help="rnd | crs (default) | ucb."),
     planner: str | None = typer.Option(
-        None, "--planner", help="twisted (default, inverse model) | random-low | low-level-only."
+        None,
+        "--planner",
+        help="twisted (default, inverse model) | sac (SAC+HER policy) | random-low | low-level-only.",
     ),
     workers: int = typer.Option(2, "--workers", min=1, help="Simulator processes (1: in this process)."),
     seed: int | None = typer.Option(None, "--seed", help="Seed of the search (default 0)."),
@@ -137,18 +129,28 @@ def plan_command(
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database."""
-    from twisted.planner import PlanInputError, StopSignals, check_goal, resume_search, start_search
+    from twisted.planner import (
+        PlanInputError,
+        StopSignals,
+        curve_sampler,
+        make_goal,
+        resume_search,
+        start_search,
+    )
     from twisted.sim.pool import SimPool
     from twisted.store.search import find_resumable_run, load_run
 
     goal_p = None
-    if goal is not None:
+    if goal is not None or knot is not None or crossings is not None:
         try:
-            goal_p = check_goal(goal)
+            goal_p = make_goal(goal, knot, crossings)
         except PlanInputError as exc:
-            fail(f"--goal: {exc}")
+            fail(f"{'--knot' if knot is not None else '--goal'}: {exc}")
     elif not resume:
-        fail("--goal is required (P-data JSON, e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]')")
+        fail(
+            "a goal is required: --goal P-DATA (e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]') "
+            "or --knot NAME (e.g. overhand)"
+        )
     store = _open(ctx)
 
     run_id: int | None = None
@@ -158,12 +160,12 @@ def plan_command(
     if resume:
         run_id = resume_run_id if resume_run_id is not None else find_resumable_run(store, goal_p)
         if run_id is None:
-            fail("--resume: no unfinished planner run" + (f" for goal {goal_p.key}" if goal_p else ""))
+            fail("--resume: no unfinished planner run" + (f" for goal {goal_p.spec}" if goal_p else ""))
         info = load_run(store, run_id, with_nodes=False)
         if info is None:
             fail(f"--resume {run_id}: there is no planner run {run_id} in this database")
-        if goal_p is not None and info.goal != goal_p:
-            fail(f"--resume {run_id}: that run's goal is {info.goal.key}, not {goal_p.key}")
+        if goal_p is not None and info.goal.spec != goal_p.spec:
+            fail(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal_p.spec}")
         if start_config is not None:
             fail("--start-config cannot change the start of a resumed run")
         parameters = info.parameters
@@ -181,7 +183,10 @@ def plan_command(
         plan_limit=plan_limit,
         base=parameters,
     )
-    sampler, used_model_id = _sampler(store, options.planner, model_id)
+    try:
+        sampler, used_model_id = curve_sampler(store, options.planner, model_id)
+    except PlanInputError as exc:
+        fail(str(exc))
 
     stop = StopSignals()
     columns = (
@@ -254,7 +259,10 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
     if as_json:
         payload = {
             "run_id": result.run_id,
-            "goal": search.goal.to_list(),
+            "goal": search.goal.spec,
+            "knot": search.goal.knot,
+            "goal_states": [p.to_list() for p in search.goal.states],
+            "reached_state": result.path[-1].p_data.to_list() if result.path else None,
             "outcome": result.status,
             "solved": result.solved,
             "search_time_s": round(result.elapsed_s, 3),
@@ -269,7 +277,9 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
     outcome = "[bold green]solved[/]" if result.solved else f"[bold red]not solved ({result.status})[/]"
     console.print(
         f"run {result.run_id}: {outcome}"
-        f"  goal {search.goal.key}  search time {result.elapsed_s:.1f} s  simulator calls {result.sim_calls}"
+        f"  goal {search.goal.label}"
+        + (f" reached {result.path[-1].p_data.key}" if result.path and search.goal.knot else "")
+        + f"  search time {result.elapsed_s:.1f} s  simulator calls {result.sim_calls}"
         f"  iterations {result.iterations}  nodes {result.nodes}  states {result.states}",
         highlight=False,
     )
@@ -308,7 +318,7 @@ def replay_command(
             json.dumps(
                 {
                     "run_id": run_id,
-                    "goal": result.goal.to_list(),
+                    "goal": result.goal.spec,
                     "reached_goal": result.reached_goal,
                     "steps": [
                         {
@@ -336,5 +346,5 @@ def replay_command(
             if result.reached_goal
             else "[bold red]does not reach the goal[/]"
         )
-        console.print(f"run {run_id}: the replayed plan {verdict} {result.goal.key}", highlight=False)
+        console.print(f"run {run_id}: the replayed plan {verdict} {result.goal.label}", highlight=False)
     raise typer.Exit(EXIT_OK if result.reached_goal else EXIT_NOT_REACHED)

@@ -446,23 +446,16 @@ def _set_row(store: Any, row_id: int, **values: Any) -> None:
         session.execute(update(EvalResult).where(EvalResult.id == row_id).values(**values))
 
 
-def _sampler(store: Any, planner: str, model_id: int | None) -> tuple[Any, int | None]:
-    """The curve sampler of a planner kind (the inverse model for ``twisted``) and the model's id."""
-    if planner != "twisted":
-        return None, None
-    import torch
-
-    from twisted.model.registry import load_model
-    from twisted.planner import ModelCurves
-
-    torch.set_num_threads(1)  # one core per planner: parallel evaluations share the machine
-    model = load_model(store, model_id)
-    return ModelCurves(model), model.model_id
-
-
 def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
     """Run one (goal, seed) with the planner and store its outcome (in the calling process)."""
-    from twisted.planner import PlannerOptions, StopSignals, resume_search, start_search
+    from twisted.planner import (
+        PlannerOptions,
+        StopSignals,
+        curve_sampler,
+        make_goal,
+        resume_search,
+        start_search,
+    )
     from twisted.sim import SimPool
     from twisted.store import open_store
 
@@ -474,7 +467,7 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         if claimed is None:
             return TaskOutcome(task.goal_key, task.seed, "skipped")
         row_id, resume_run_id = claimed
-        goal = parse_p_data(task.goal_key)
+        goal = make_goal(task.goal_key)
         option_fields = {k: v for k, v in task.options.items() if k in PlannerOptions.__dataclass_fields__}
         options = PlannerOptions(**{**option_fields, "planner": task.planner, "seed": task.seed})
         stop = StopSignals()
@@ -486,10 +479,10 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
                 info = load_run(store, resume_run_id, with_nodes=False)
                 if info is not None and info.outcome != "solved" and info.checkpoint is not None:
                     # continue with the model the run started with
-                    sampler, _ = _sampler(store, task.planner, info.parameters.get("model_id"))
+                    sampler, _ = curve_sampler(store, task.planner, info.parameters.get("model_id"))
                     search = resume_search(store, resume_run_id, pool, sampler=sampler, stop=stop)
             if search is None:
-                sampler, model_id = _sampler(store, task.planner, task.options.get("model_id"))
+                sampler, model_id = curve_sampler(store, task.planner, task.options.get("model_id"))
                 search = start_search(
                     store,
                     goal,
@@ -633,13 +626,13 @@ def prepare_eval(
         label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
     if not label or len(label) > 32:
         raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
-    if planner == "twisted":
-        from twisted.model.registry import ModelError, load_model
+    if planner in ("twisted", "sac"):
+        from twisted.planner import PlanInputError, curve_sampler
 
         try:  # fail before starting any process or task when the model cannot be had
-            options["model_id"] = load_model(store, options.get("model_id")).model_id
-        except ModelError as exc:
-            raise EvalInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
+            options["model_id"] = curve_sampler(store, planner, options.get("model_id"))[1]
+        except PlanInputError as exc:
+            raise EvalInputError(str(exc)) from None
     with store.session() as session:
         record = load_problem_set(session, set_name)
     if record is None:
@@ -673,7 +666,7 @@ def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tup
     tasks, done = [], 0
     for seed in prepared.seeds:
         for problem in record.problems:
-            row = by_key.get((problem.p_data.key, seed))
+            row = by_key.get((problem.goal_key, seed))
             if row is not None and row.status in FINISHED_STATUSES:
                 done += 1
                 continue
@@ -685,7 +678,7 @@ def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tup
                     eval_run_id=eval_run_id,
                     set_id=record.id,
                     problem_id=problem.id,
-                    goal_key=problem.p_data.key,
+                    goal_key=problem.goal_key,
                     planner=planner,
                     label=label,
                     seed=int(seed),

@@ -38,6 +38,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from twisted.goals import Goal, state_goal
 from twisted.topology import PData
 
 __all__ = [
@@ -59,6 +60,8 @@ __all__ = [
     "ModelCurves",
     "ReplayResult",
     "check_goal",
+    "curve_sampler",
+    "make_goal",
     "high_level",
     "replay",
     "resume_search",
@@ -67,7 +70,7 @@ __all__ = [
     "tree_from_rows",
 ]
 
-PLANNERS = ("twisted", "random-low", "low-level-only")
+PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
 
 # The inverse model encodes goals of up to 6 crossings (DESIGN section 6: the reference truncated to 3).
@@ -322,7 +325,7 @@ class Twisted:
 
     def __init__(
         self,
-        goal: PData,
+        goal: Goal | PData,
         tree: SearchTree,
         options: PlannerOptions,
         pool: Pool,
@@ -338,7 +341,7 @@ class Twisted:
         options.validate()
         if len(tree) == 0:
             raise ValueError("the tree needs its root (the initial configuration)")
-        self.goal = goal
+        self.goal = goal if isinstance(goal, Goal) else state_goal(goal)
         self.tree = tree
         self.options = options
         self.pool = pool
@@ -369,8 +372,9 @@ class Twisted:
         self.goal_node: Node | None = None
         for p_data in tree.states.values():
             self._reached(p_data)
-        if goal.key in tree.by_state:
-            self.goal_node = tree.nodes[tree.by_state[goal.key][0]]
+        reached = [tree.by_state[key][0] for key in self.goal.keys if key in tree.by_state]
+        if reached:
+            self.goal_node = tree.nodes[min(reached)]
 
         self._saved = len(tree)  # nodes already in the store
         self._t0: float | None = None  # set while run() is searching
@@ -621,7 +625,7 @@ class Twisted:
         )
         if p_data.key not in self.plans:
             self._reached(p_data)
-        if self.goal_node is None and p_data == self.goal:
+        if self.goal_node is None and p_data in self.goal:
             self.goal_node = node
         return node
 
@@ -672,12 +676,85 @@ def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROS
     return p_data
 
 
-def high_level(store: Any, goal: PData, limit: int) -> Callable[[PData], list[Any]]:
-    """``s -> plans(s, goal)``, shortest first, through the store's plan cache."""
+def make_goal(
+    goal: str | Sequence[Any] | PData | None = None,
+    knot: str | None = None,
+    crossings: int | None = None,
+    max_cross: int = MAX_GOAL_CROSS,
+) -> Goal:
+    """The goal of a search: one P-data state (``goal``, or a ``knot:<name>@<n>`` spec) or a knot by name.
+
+    Exactly one of ``goal`` and ``knot`` is given; ``crossings`` picks the knot's states of that many
+    crossings (default: the fewest). Raises :class:`PlanInputError` saying which input is wrong.
+    """
+    from twisted.goals import KNOT_PREFIX, GoalError, goal_from_spec, knot_goal
+
+    if (goal is None) == (knot is None):
+        raise PlanInputError("give exactly one goal: --goal P-DATA or --knot NAME")
+    if crossings is not None and knot is None:
+        raise PlanInputError("--crossings goes with --knot (a P-data goal has its own crossing count)")
+    try:
+        if knot is not None:
+            found = knot_goal(knot, crossings)
+        elif isinstance(goal, str) and goal.strip().startswith(KNOT_PREFIX):
+            found = goal_from_spec(goal)
+        else:
+            assert goal is not None
+            return state_goal(check_goal(goal, max_cross))
+    except GoalError as exc:
+        raise PlanInputError(str(exc)) from None
+    if found.cross > max_cross:
+        raise PlanInputError(
+            f"knot goal {found.spec} has {found.cross} crossings; the model encodes at most {max_cross}"
+        )
+    return found
+
+
+def curve_sampler(
+    store: Any, planner: str, model_id: int | None = None, torch_threads: int = 1
+) -> tuple[CurveSampler | None, int | None]:
+    """The curve sampler of a planner kind and the id of the model it uses (None: random curves).
+
+    ``twisted`` samples the inverse model (``model_id``; default the newest in the store, else the shipped
+    one); ``sac`` a trained SAC+HER policy (``twisted rl train``); the baselines need none. Raises
+    :class:`PlanInputError` when the model is missing. ``torch_threads``: the simulator workers own the
+    cores, and a second torch thread on a busy machine only slows sampling.
+    """
+    if planner not in ("twisted", "sac"):
+        return None, None
+    import torch
+
+    torch.set_num_threads(torch_threads)
+    if planner == "sac":
+        try:
+            from twisted.rl import load_policy_sampler
+        except ImportError as exc:
+            message = f"--planner sac needs the rl extra (pip install 'twisted-knots[rl]'): {exc}"
+            raise PlanInputError(message) from None
+        try:
+            return load_policy_sampler(store, model_id)
+        except LookupError as exc:
+            raise PlanInputError(f"{exc} (train one with `twisted rl train`)") from None
+    from twisted.model.registry import ModelError, load_model
+
+    try:
+        model = load_model(store, model_id)
+    except ModelError as exc:
+        raise PlanInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
+    return ModelCurves(model), model.model_id
+
+
+def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
+    """``s -> plans(s, goal)``, shortest first, through the store's plan cache.
+
+    For a goal of several states (a knot), the plans to each member are merged, shortest first
+    (ties in member order), and the first ``limit`` kept: each member's plans are cached on their own.
+    """
     from twisted.store.plans import cached_plans
 
     def plans_from(start: PData) -> list[Any]:
-        return list(cached_plans(store, start, goal, limit))
+        found = [plan for member in goal.states for plan in cached_plans(store, start, member, limit)]
+        return sorted(found, key=lambda plan: len(plan.moves))[:limit]
 
     return plans_from
 
@@ -697,7 +774,7 @@ def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
 
 def start_search(
     store: Any,
-    goal: PData,
+    goal: Goal | PData,
     options: PlannerOptions,
     pool: Pool,
     sampler: CurveSampler | None = None,
@@ -713,6 +790,7 @@ def start_search(
     from twisted.store.search import SearchRun
 
     options.validate()
+    goal = goal if isinstance(goal, Goal) else state_goal(goal)
     if start_configuration_id is None:
         root = _root(*straight_rope())
     else:
@@ -729,8 +807,8 @@ def start_search(
                 raise PlanInputError(message) from None
             q, points = config.q_array(), config.points_array()
         root = _root(q, points, top(points))
-    if root.p_data == goal:
-        raise PlanInputError(f"the initial configuration is already in the goal state {goal.key}")
+    if root.p_data in goal:
+        raise PlanInputError(f"the initial configuration is already in the goal state {root.p_data.key}")
     tree = SearchTree()
     tree.add(root)
     rng = np.random.default_rng(options.seed)
@@ -839,12 +917,12 @@ class ReplayStep:
 @dataclass
 class ReplayResult:
     run_id: int
-    goal: PData
+    goal: Goal
     steps: list[ReplayStep]
 
     @property
     def reached_goal(self) -> bool:
-        return bool(self.steps) and self.steps[-1].replayed == self.goal
+        return bool(self.steps) and self.steps[-1].replayed in self.goal
 
 
 def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult:

@@ -480,7 +480,7 @@ def render_run(
         node = path[i]
         fig, _, ax = _panel_figure(images[i] if images else None)
         what = "start" if i == 0 else f"after curve {i}/{n_steps}"
-        goal_mark = "  = goal" if node.p_data == info.goal else ""
+        goal_mark = "  = goal" if node.p_data in info.goal else ""
         draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
         next_curve = path[i + 1].curve if i < n_steps else None
         if next_curve is not None:

@@ -43,6 +43,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
+from twisted.goals import KNOT_PREFIX
 from twisted.store.models import Base, utcnow
 from twisted.topology import PData, parse_p_data
 
@@ -186,13 +187,23 @@ class DiscretisationResult(Base):
 
 @dataclass(frozen=True)
 class ProblemRecord:
-    """A goal of a set as plain data."""
+    """A goal of a set as plain data.
+
+    ``p_data`` is the goal state, or for a knot goal its first state; ``spec`` is then the knot goal
+    (``knot:<name>@<crossings>``, see :mod:`twisted.goals`) and ``frequency`` counts all its states.
+    """
 
     id: int | None
     idx: int
     p_data: PData
     frequency: int
     tag: str
+    spec: str | None = None
+
+    @property
+    def goal_key(self) -> str:
+        """What ``problems.goal_key`` and ``eval_results.goal_key`` hold: the goal spec or the P-data key."""
+        return self.spec if self.spec is not None else self.p_data.key
 
 
 @dataclass(frozen=True)
@@ -228,7 +239,7 @@ def save_problem_set(
             Problem(
                 set_id=row.id,
                 idx=i,
-                goal_key=p.p_data.key,
+                goal_key=p.goal_key,
                 p_data=p.p_data.to_list(),
                 cross=p.p_data.cross,
                 frequency=int(p.frequency),
@@ -247,7 +258,17 @@ def _record(row: ProblemSet, problems: Sequence[Problem]) -> ProblemSetRecord:
         seed=row.seed,
         parameters=dict(row.parameters or {}),
         created_at=row.created_at,
-        problems=[ProblemRecord(p.id, p.idx, parse_p_data(p.p_data), p.frequency, p.tag) for p in problems],
+        problems=[
+            ProblemRecord(
+                p.id,
+                p.idx,
+                parse_p_data(p.p_data),
+                p.frequency,
+                p.tag,
+                spec=p.goal_key if p.goal_key.startswith(KNOT_PREFIX) else None,
+            )
+            for p in problems
+        ],
     )
 
 

@@ -46,6 +46,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
+from twisted.goals import Goal, state_goal
 from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
@@ -76,6 +77,9 @@ class SearchRunRow(Base):
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), primary_key=True)
     goal_state_id: Mapped[int] = mapped_column(ForeignKey("topological_states.id"), index=True)
     goal_cross: Mapped[int] = mapped_column(Integer)
+    # A knot goal (revision 0008): the knot's name; any state of ``goal_cross`` crossings that ties it is
+    # the goal (the members are in ``runs.parameters['goal_states']``). NULL: the goal is goal_state_id.
+    goal_knot: Mapped[str | None] = mapped_column(String(64), index=True)
     planner: Mapped[str] = mapped_column(String(32))
     heuristic: Mapped[str] = mapped_column(String(16))
     start_configuration_id: Mapped[int | None] = mapped_column(ForeignKey("configurations.id"))
@@ -182,7 +186,7 @@ class SearchRunInfo:
     """A planner run as stored: its parameters, outcome, checkpoint and (optionally) its tree."""
 
     run_id: int
-    goal: PData
+    goal: Goal
     parameters: dict[str, Any]
     outcome: str
     status: str
@@ -228,7 +232,7 @@ class SearchRun:
     def create(
         cls,
         store: Any,
-        goal: PData,
+        goal: Goal,
         parameters: dict[str, Any],
         root: NodeLike,
         checkpoint: CheckpointLike,
@@ -240,7 +244,9 @@ class SearchRun:
                 kind="plan",
                 parameters={
                     **parameters,
-                    "goal": goal.to_list(),
+                    "goal": goal.representative.to_list(),
+                    "goal_spec": goal.spec,
+                    "goal_states": [p.to_list() for p in goal.states],
                     "start_configuration_id": start_configuration_id,
                 },
                 seed=parameters.get("seed"),
@@ -253,8 +259,9 @@ class SearchRun:
             session.add(
                 SearchRunRow(
                     run_id=run.id,
-                    goal_state_id=get_or_create_state(session, goal).id,
+                    goal_state_id=get_or_create_state(session, goal.representative).id,
                     goal_cross=goal.cross,
+                    goal_knot=goal.knot,
                     planner=parameters.get("planner", "twisted"),
                     heuristic=parameters.get("heuristic", "crs"),
                     start_configuration_id=start_configuration_id,
@@ -433,10 +440,17 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
         )
         checkpoint = _checkpoint(session.get(SearchCheckpoint, run_id))
         nodes = _nodes(session, run_id) if with_nodes else []
+        parameters = dict(run.parameters or {})
+        if row.goal_knot is not None:
+            members = [parse_p_data(p) for p in parameters.get("goal_states", [])]
+            members.sort(key=lambda p: p.key)
+            goal = Goal(tuple(members), knot=row.goal_knot, crossings=row.goal_cross)
+        else:
+            goal = state_goal(parse_p_data(goal_key or "[]"))
         return SearchRunInfo(
             run_id=run_id,
-            goal=parse_p_data(goal_key or "[]"),
-            parameters=dict(run.parameters or {}),
+            goal=goal,
+            parameters=parameters,
             outcome=row.outcome,
             status=run.status,
             start_configuration_id=row.start_configuration_id,
@@ -466,13 +480,15 @@ def discard_after_checkpoint(store: Any, run_id: int) -> int:
         return int(count)
 
 
-def find_resumable_run(store: Any, goal: PData | None = None) -> int | None:
+def find_resumable_run(store: Any, goal: Goal | None = None) -> int | None:
     """The newest planner run that did not solve its goal and is not live (for ``goal`` when given)."""
     with store.session() as session:
         query = select(SearchRunRow.run_id).where(SearchRunRow.outcome != "solved")
-        if goal is not None:
+        if goal is not None and goal.knot is not None:
+            query = query.where(SearchRunRow.goal_knot == goal.knot, SearchRunRow.goal_cross == goal.cross)
+        elif goal is not None:
             query = query.join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id).where(
-                TopologicalState.key == goal.key
+                TopologicalState.key == goal.representative.key, SearchRunRow.goal_knot.is_(None)
             )
         candidates = list(session.scalars(query.order_by(SearchRunRow.run_id.desc())))
     for run_id in candidates:

@@ -1,0 +1,127 @@
+"""Planner goals: one P-data state, or every state that ties a named knot.
+
+A goal is a set of topological states; a search succeeds when it reaches any member. ``--goal`` gives a
+set of one; ``--knot overhand [--crossings N]`` gives the enumerated states of N crossings (default: the
+fewest that tie it) whose closure is that knot (:func:`twisted.knots.states_tying`).
+
+Goals are written as one line of text, the *goal spec*, wherever a goal must be stored or passed on:
+the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@<crossings>`` for a knot
+(``knot:overhand@3``). Problem sets, evaluation results and planner runs store that text.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from twisted.topology import PData
+
+__all__ = ["Goal", "GoalError", "KNOT_PREFIX", "goal_from_spec", "knot_goal", "state_goal"]
+
+KNOT_PREFIX = "knot:"
+# Knots are searched among enumerated states; 5 crossings already takes ~25 s to enumerate, and the
+# inverse model encodes at most 6.
+MAX_KNOT_CROSSINGS = 5
+_KNOT_SPEC = re.compile(r"^knot:(?P<name>[^@\s]+)@(?P<crossings>\d+)$")
+
+
+class GoalError(ValueError):
+    """A goal the planner cannot take (bad P-data, unknown knot, no state of that knot); says why."""
+
+
+@dataclass(frozen=True)
+class Goal:
+    """A set of goal states (sorted by key); ``knot`` names the knot they tie for a knot goal."""
+
+    states: tuple[PData, ...]
+    knot: str | None = None
+    crossings: int | None = None  # for a knot goal: the crossing count its states were taken from
+
+    def __post_init__(self) -> None:
+        if not self.states:
+            raise GoalError("a goal needs at least one state")
+        keys = [p.key for p in self.states]
+        if len(set(keys)) != len(keys) or keys != sorted(keys):
+            raise ValueError("goal states must be unique and sorted by key (use state_goal / knot_goal)")
+
+    def __contains__(self, p_data: object) -> bool:
+        return isinstance(p_data, PData) and p_data.key in self.keys
+
+    @property
+    def keys(self) -> frozenset[str]:
+        return frozenset(p.key for p in self.states)
+
+    @property
+    def cross(self) -> int:
+        """The most crossings of a member: no state with more can lead to the goal."""
+        return max(p.cross for p in self.states)
+
+    @property
+    def representative(self) -> PData:
+        """The first member by key: where one state must stand for the goal."""
+        return self.states[0]
+
+    @property
+    def spec(self) -> str:
+        """The goal as one line of text (see the module docstring); :func:`goal_from_spec` reads it back."""
+        if self.knot is not None:
+            return f"{KNOT_PREFIX}{self.knot}@{self.crossings}"
+        return self.states[0].key
+
+    @property
+    def label(self) -> str:
+        """What a person reads: the knot name and its crossing count, or the P-data key."""
+        if self.knot is not None:
+            return f"{self.knot} ({len(self.states)} states of {self.crossings} crossings)"
+        return self.states[0].key
+
+
+def _sorted(states: Iterable[PData]) -> tuple[PData, ...]:
+    return tuple(sorted({p.key: p for p in states}.values(), key=lambda p: p.key))
+
+
+def state_goal(p_data: PData) -> Goal:
+    """The goal of reaching one state."""
+    return Goal(_sorted([p_data]))
+
+
+def knot_goal(name: str, crossings: int | None = None) -> Goal:
+    """Every enumerated state of ``crossings`` crossings (default: the fewest possible) that ties ``name``."""
+    from twisted.knots import KnotNameError, resolve_knot, states_tying
+
+    try:
+        resolve_knot(name)
+    except KnotNameError as exc:
+        raise GoalError(str(exc)) from None
+    if crossings is not None and not 1 <= crossings <= MAX_KNOT_CROSSINGS:
+        raise GoalError(f"--crossings must be 1 to {MAX_KNOT_CROSSINGS} for a knot goal, got {crossings}")
+    states = [p for p in states_tying(name, crossings) if p.cross > 0]
+    if not states:
+        where = f"with {crossings}" if crossings is not None else f"with up to {MAX_KNOT_CROSSINGS}"
+        where += " crossings"
+        raise GoalError(f"no rope state {where} ties the knot {name!r}")
+    if crossings is None:
+        crossings = states[0].cross
+    if any(p.cross != crossings for p in states) or crossings > MAX_KNOT_CROSSINGS:
+        raise GoalError(f"knot {name!r} needs more than {MAX_KNOT_CROSSINGS} crossings")
+    return Goal(_sorted(states), knot=name, crossings=crossings)
+
+
+def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
+    """A goal from its spec: ``Goal``, P-data (text, list or PData) or ``knot:<name>@<crossings>``."""
+    from twisted.moves import parse_state
+    from twisted.topology import PDataError
+
+    if isinstance(spec, Goal):
+        return spec
+    if isinstance(spec, str) and spec.strip().startswith(KNOT_PREFIX):
+        match = _KNOT_SPEC.match(spec.strip())
+        if match is None:
+            raise GoalError(f"knot goal {spec!r} must read knot:<name>@<crossings>, e.g. knot:overhand@3")
+        return knot_goal(match["name"], int(match["crossings"]))
+    try:
+        return state_goal(parse_state(spec, "goal"))
+    except PDataError as exc:
+        raise GoalError(str(exc)) from None
