@@ -1,0 +1,636 @@
+"""Knots by name: which knot a rope state ties (issue 10).
+
+Closing the rope. An open rope ties no knot in the strict sense; what a person means by "the rope
+ties an overhand" is the knot we get by lowering both ends below the table and joining them there
+by an arc that passes *under* everything. The knot type of that closure does not depend on the
+arc's path: the rope lies in the half-space ``z > -h/2`` and the closing arc consists of the two
+vertical drops to depth ``-h`` plus a simple arc in the plane ``z = -h``. Any two simple arcs in that
+plane with the same end points are isotopic inside the plane (the plane holds no part of the rope),
+so any two closures are isotopic knots. In a diagram this means: route the closing arc through any
+faces, crossing the rope *under* it wherever it must, and the invariants come out the same.
+
+The two routes (they must agree, ``tests/test_knots.py`` checks it on collected data):
+
+* from P-data (:func:`identify`): :func:`twisted.diagram.diagram` rebuilds the planar diagram of the
+  open rope with its faces; the head tip lies in one face, the tail tip in another; a shortest path
+  in the dual graph (faces joined across the segment sides that separate them) gives the closing
+  arc. It crosses each segment at most once and enters each face once, so inside every face it is
+  one chord and the closed diagram is planar.
+* from link points (:func:`identify_points`): the ends are lowered below the table and joined by a
+  straight segment underneath; the closed polygon is projected to the table and its crossings read
+  as in :func:`twisted.topology.top`.
+
+Invariants (computed here, no dependency):
+
+* ``alexander``: the Alexander polynomial from the Wirtinger presentation (Fox calculus), an
+  ``(N-1) x (N-1)`` minor of the ``N x N`` Alexander matrix of a diagram with ``N`` crossings,
+  normalised to be symmetric (``Delta(t) = Delta(1/t)``) with ``Delta(1) = +1`` (Conway's
+  normalisation); stored as the coefficients of ``t^-d .. t^d``, e.g. the trefoil ``(1, -1, 1)``.
+* ``determinant``: ``|Delta(-1)|``.
+* ``jones``: the Jones polynomial from the Kauffman bracket, ``V(t) = (-A^3)^(-w) <K>`` at
+  ``A = t^(-1/4)``, stored as ``((exponent of t, coefficient), ...)`` by increasing exponent. It
+  tells a knot from its mirror (``V_mirror(t) = V(1/t)``).
+
+Chirality. A crossing's sign is the P-data sign ``sign((d_over x d_under) . e_z)``, the usual
+right-hand rule. ``"+"`` names the mirror image whose minimal diagram has only positive crossings:
+``3_1+`` is the right-handed trefoil, ``V = t + t^3 - t^4``; so the 3-crossing rope whose visits
+alternate O/U with one common sign ``+`` ties ``3_1+``. Likewise ``5_1+`` and ``5_2+`` are the
+positive 5-crossing knots (their Jones polynomials have positive exponents). ``4_1`` is its own
+mirror image.
+
+Identification compares ``(alexander, jones)`` with the catalogue of knots up to five crossings;
+a diagram whose invariants match no entry is ``"unknown"`` (it still carries its invariants).
+Within the catalogue the pair separates every entry; a larger knot with the same pair would be
+misnamed, a risk that does not arise for the small diagrams a 21-link rope makes.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import lru_cache
+
+import numpy as np
+import numpy.typing as npt
+
+from twisted.diagram import LEFT, RIGHT, diagram
+from twisted.topology import PData, parse_p_data
+
+__all__ = [
+    "CATALOGUE",
+    "KNOT_NAMES",
+    "UNKNOWN",
+    "GaussCode",
+    "KnotNameError",
+    "KnotType",
+    "closed_gauss_code",
+    "gauss_code_from_polygon",
+    "identify",
+    "identify_points",
+    "invariants",
+    "knot_type_name",
+    "resolve_knot",
+    "states_tying",
+]
+
+UNKNOWN = "unknown"
+
+
+@dataclass(frozen=True, slots=True)
+class KnotType:
+    """The knot a (closed) rope ties: its catalogue name and the invariants that named it.
+
+    ``alexander``: coefficients of ``t^-d .. t^d``, symmetric, ``Delta(1) = 1``. ``jones``:
+    ``((exponent of t, coefficient), ...)``. ``writhe``: of the diagram the invariants were computed
+    from (not an invariant; left out of equality). ``name`` is ``"unknown"`` outside the catalogue.
+    """
+
+    name: str
+    alexander: tuple[int, ...]
+    determinant: int
+    jones: tuple[tuple[int, int], ...]
+    writhe: int | None = field(default=None, compare=False)
+
+    @property
+    def crossing_number(self) -> int | None:
+        """The minimal crossing number for catalogue knots (``3_1+`` -> 3), None when unknown."""
+        if self.name == UNKNOWN:
+            return None
+        return int(self.name.split("_")[0])
+
+    @property
+    def is_unknot(self) -> bool:
+        return self.name == "0_1"
+
+    def alexander_text(self) -> str:
+        """The Alexander polynomial as text, e.g. ``t^-1 - 1 + t``."""
+        d = (len(self.alexander) - 1) // 2
+        return _poly_text([(i - d, c) for i, c in enumerate(self.alexander)])
+
+    def jones_text(self) -> str:
+        """The Jones polynomial as text, e.g. ``t + t^3 - t^4``."""
+        return _poly_text(list(self.jones))
+
+
+def _poly_text(terms: Sequence[tuple[int, int]]) -> str:
+    out = []
+    for e, c in terms:
+        if c == 0:
+            continue
+        mag = abs(c)
+        mono = "" if e == 0 else ("t" if e == 1 else f"t^{e}")
+        body = str(mag) if not mono else (mono if mag == 1 else f"{mag}{mono}")
+        out.append(("- " if c < 0 else "+ ") + body)
+    if not out:
+        return "0"
+    text = " ".join(out)
+    return text[2:] if text.startswith("+ ") else "-" + text[2:]
+
+
+# ---------------------------------------------------------------------------------------------
+# Closed diagrams as signed Gauss codes
+
+
+@dataclass(frozen=True, slots=True)
+class GaussCode:
+    """A closed knot diagram: the crossing events met walking once around the knot.
+
+    ``events[i] = (crossing, over)`` with ``crossing`` in ``0..N-1`` and ``over`` True when the knot
+    passes over there; every crossing appears twice, once over and once under. ``signs[c]`` is
+    crossing ``c``'s sign (+1 / -1, right-hand rule).
+    """
+
+    events: tuple[tuple[int, bool], ...]
+    signs: tuple[int, ...]
+
+    @property
+    def n_crossings(self) -> int:
+        return len(self.signs)
+
+    @property
+    def writhe(self) -> int:
+        return sum(self.signs)
+
+    def pd_code(self) -> list[tuple[int, int, int, int]]:
+        """Planar-diagram code: per crossing its four edges, incoming under first, then counter-clockwise.
+
+        Edge ``i`` runs from event ``i`` to event ``i + 1``. With the over strand along +x, a
+        positive crossing has the under strand along +y, so counter-clockwise from under-in (south)
+        come over-out (east), under-out (north), over-in (west); a negative one has the under strand
+        along -y: under-in (north), over-in (west), under-out (south), over-out (east).
+        """
+        m = len(self.events)
+        ends: dict[int, dict[str, int]] = {c: {} for c in range(self.n_crossings)}
+        for i, (c, over) in enumerate(self.events):
+            strand = "over" if over else "under"
+            ends[c][strand + "_in"] = (i - 1) % m
+            ends[c][strand + "_out"] = i
+        pd = []
+        for c in range(self.n_crossings):
+            e = ends[c]
+            if self.signs[c] > 0:
+                pd.append((e["under_in"], e["over_out"], e["under_out"], e["over_in"]))
+            else:
+                pd.append((e["under_in"], e["over_in"], e["under_out"], e["over_out"]))
+        return pd
+
+
+def _closing_path(p: PData) -> list[tuple[int, str]]:
+    """The closing arc from the tail tip to the head tip: the segments it passes under, in order.
+
+    Each entry is ``(segment, side it comes from)``. Breadth-first search in the dual graph from the
+    tail's face to the head's face, in a fixed order so the result is deterministic.
+    """
+    d = diagram(p)
+    head_face, tail_face = d.end_faces()
+    previous: dict[int, tuple[int, int, str] | None] = {tail_face: None}
+    queue = deque([tail_face])
+    while queue:
+        f = queue.popleft()
+        if f == head_face:
+            break
+        for seg, side in d.faces[f].sides:
+            other = RIGHT if side == LEFT else LEFT
+            g = d.face_of(seg, other)
+            if g not in previous:
+                previous[g] = (f, seg, side)
+                queue.append(g)
+    path: list[tuple[int, str]] = []
+    f = head_face
+    while (step := previous[f]) is not None:
+        f, seg, side = step
+        path.append((seg, side))
+    path.reverse()
+    return path
+
+
+def closed_gauss_code(p: PData) -> GaussCode:
+    """The closed diagram of rope state ``p``: the rope, then the closing arc under everything.
+
+    Rope crossings keep their P-data signs. Where the closing arc passes under segment ``k`` from its
+    left side to its right side, the under strand points to the right of the over strand, so the
+    sign is ``-``; from right to left ``+``.
+    """
+    n = p.cross
+    signs = [s for _, _, s in p.crossings()]
+    crossing_of = {}
+    for c, (o, u, _) in enumerate(p.crossings()):
+        crossing_of[o] = c
+        crossing_of[u] = c
+    closing: dict[int, int] = {}  # segment -> new crossing id
+    closing_events: list[tuple[int, bool]] = []
+    for seg, side in _closing_path(p):
+        c = len(signs)
+        signs.append(-1 if side == LEFT else 1)
+        closing[seg] = c
+        closing_events.append((c, False))
+    events: list[tuple[int, bool]] = []
+    for k in range(2 * n + 1):
+        if k > 0:
+            v = p.visits[k - 1]
+            events.append((crossing_of[k], v.over == "O"))
+        if k in closing:
+            events.append((closing[k], True))
+    events.extend(closing_events)
+    return GaussCode(tuple(events), tuple(signs))
+
+
+def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def gauss_code_from_polygon(points: npt.ArrayLike) -> GaussCode:
+    """The diagram of a closed polygon (vertices in order, the last joined to the first) seen from above.
+
+    Segments whose projections share an end point (neighbours, or neighbours through a vertical
+    segment, whose projection is a point) are not tested against each other. Heights at a crossing
+    are interpolated along each segment; signs by the right-hand rule. Raises ``ValueError`` when
+    the projection is degenerate at a crossing (equal heights), which a small perturbation fixes.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
+        raise ValueError(f"a closed polygon needs shape (N>=3, 3), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("polygon points contain NaN or infinity")
+    start = pts
+    d = np.roll(pts, -1, axis=0) - pts
+    m = len(pts)
+    i_idx, j_idx = np.triu_indices(m, k=1)
+    xy = pts[:, :2]
+    # projected vertex identity: vertices with equal (x, y) are one point of the projection
+    _, vid = np.unique(xy, axis=0, return_inverse=True)
+    vid = vid.reshape(-1)
+    a0, a1 = vid[i_idx], vid[(i_idx + 1) % m]
+    b0, b1 = vid[j_idx], vid[(j_idx + 1) % m]
+    share = (a0 == b0) | (a0 == b1) | (a1 == b0) | (a1 == b1)
+    di, dj = d[i_idx, :2], d[j_idx, :2]
+    w = start[j_idx, :2] - start[i_idx, :2]
+    denom = _cross2(di, dj)
+    ok = (np.abs(denom) > 1e-15) & ~share
+    safe = np.where(ok, denom, 1.0)
+    t = _cross2(w, dj) / safe
+    u = _cross2(w, di) / safe
+    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
+    zi = start[i_idx, 2] + t * d[i_idx, 2]
+    zj = start[j_idx, 2] + u * d[j_idx, 2]
+    if np.any(zi == zj):
+        raise ValueError("two strands cross at equal heights in the projection; perturb the polygon")
+    i_over = zi > zj
+    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
+    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
+    signs = tuple(int(s) for s in np.where(_cross2(d_over, d_under) > 0, 1, -1))
+    k = len(i_idx)
+    param = np.concatenate([i_idx + t, j_idx + u])
+    overs = np.concatenate([i_over, ~i_over])
+    order = np.argsort(param, kind="stable")
+    events = tuple((int(e % k), bool(overs[e])) for e in order) if k else ()
+    return GaussCode(events, signs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Invariants
+
+
+def _int_det(rows: list[list[int]]) -> int:
+    """Exact determinant of an integer matrix (fraction-free Bareiss elimination)."""
+    a = [row[:] for row in rows]
+    n = len(a)
+    if n == 0:
+        return 1
+    sign, prev = 1, 1
+    for k in range(n - 1):
+        if a[k][k] == 0:
+            swap = next((r for r in range(k + 1, n) if a[r][k] != 0), None)
+            if swap is None:
+                return 0
+            a[k], a[swap] = a[swap], a[k]
+            sign = -sign
+        for i in range(k + 1, n):
+            for j in range(k + 1, n):
+                a[i][j] = (a[i][j] * a[k][k] - a[i][k] * a[k][j]) // prev
+        prev = a[k][k]
+    return sign * a[n - 1][n - 1]
+
+
+def _interpolate(xs: Sequence[int], ys: Sequence[int]) -> list[int]:
+    """Integer coefficients (constant first) of the polynomial through the points (Lagrange)."""
+    n = len(xs)
+    coeffs = [Fraction(0)] * n
+    for i in range(n):
+        basis = [Fraction(1)]  # product of (t - x_j) / (x_i - x_j), built coefficient by coefficient
+        denom = 1
+        for j in range(n):
+            if j == i:
+                continue
+            basis = [Fraction(0), *basis]
+            for m in range(len(basis) - 1):
+                basis[m] -= xs[j] * basis[m + 1]
+            denom *= xs[i] - xs[j]
+        for m in range(n):
+            coeffs[m] += Fraction(ys[i], denom) * basis[m]
+    if any(c.denominator != 1 for c in coeffs):
+        raise ArithmeticError("Alexander interpolation gave non-integer coefficients")
+    return [int(c) for c in coeffs]
+
+
+def alexander_polynomial(code: GaussCode) -> tuple[int, ...]:
+    """Normalised Alexander polynomial (coefficients of ``t^-d .. t^d``, ``Delta(1) = 1``).
+
+    Wirtinger arcs run from one under-passage to the next. Crossing ``c`` with over arc ``k``,
+    incoming under arc ``i`` and outgoing ``j`` gives the relation ``x_j = x_k^s x_i x_k^-s``
+    (``s`` its sign); its Fox derivatives, abelianised (every ``x -> t``) and multiplied by a unit,
+    are the row ``(1 - t) at k, t at i, -1 at j`` for ``s = +1`` and ``(1 - t), -1, t`` for ``s = -1``.
+    """
+    n = code.n_crossings
+    if n == 0:
+        return (1,)
+    # arc of each event: the arc index advances after each under-passage
+    first_under = next(i for i, (_, over) in enumerate(code.events) if not over)
+    m = len(code.events)
+    arc_at: dict[int, int] = {}
+    in_arc: dict[int, int] = {}
+    out_arc: dict[int, int] = {}
+    arc = n - 1  # walking from the first under-passage: the arc entering it is the last one
+    for step in range(m):
+        c, over = code.events[(first_under + step) % m]
+        if over:
+            arc_at[c] = arc
+        else:
+            in_arc[c] = arc
+            arc = (arc + 1) % n
+            out_arc[c] = arc
+
+    def minor_at(t: int) -> int:
+        rows = [[0] * n for _ in range(n)]
+        for c in range(n):
+            s = code.signs[c]
+            row = rows[c]
+            row[arc_at[c]] += 1 - t
+            row[in_arc[c]] += t if s > 0 else -1
+            row[out_arc[c]] += -1 if s > 0 else t
+        return _int_det([r[:-1] for r in rows[:-1]])
+
+    xs = list(range(2, n + 2))
+    coeffs = _interpolate(xs, [minor_at(x) for x in xs])
+    while coeffs and coeffs[-1] == 0:
+        coeffs.pop()
+    while coeffs and coeffs[0] == 0:
+        coeffs.pop(0)
+    if not coeffs:
+        raise ArithmeticError("Alexander polynomial vanished: the diagram is not a knot")
+    if sum(coeffs) < 0:
+        coeffs = [-c for c in coeffs]
+    if sum(coeffs) != 1 or coeffs != coeffs[::-1] or len(coeffs) % 2 == 0:
+        raise ArithmeticError(f"Alexander polynomial {coeffs} is not a knot's (symmetric, Delta(1)=1)")
+    return tuple(coeffs)
+
+
+def _loop_poly(a: dict[int, int], b: dict[int, int]) -> dict[int, int]:
+    out: dict[int, int] = {}
+    for ea, ca in a.items():
+        for eb, cb in b.items():
+            out[ea + eb] = out.get(ea + eb, 0) + ca * cb
+    return {e: c for e, c in out.items() if c}
+
+
+_LOOP = {2: -1, -2: -1}  # d = -A^2 - A^-2, the value of a closed loop
+
+
+def kauffman_bracket(pd: Sequence[tuple[int, int, int, int]]) -> dict[int, int]:
+    """Kauffman bracket ``<K>`` in ``A`` (exponent -> coefficient), normalised so ``<O> = 1``.
+
+    Crossings are smoothed one at a time (``<X[a,b,c,d]> = A <(ab)(cd)> + A^-1 <(ad)(bc)>``) while
+    a table maps each matching of the still open edge ends to its polynomial; processing the
+    crossings in walking order keeps that table small.
+    """
+    if not pd:
+        return {0: 1}
+    states: dict[tuple[tuple[int, int], ...], dict[int, int]] = {(): {0: 1}}
+    for a, b, c, dd in pd:
+        new_states: dict[tuple[tuple[int, int], ...], dict[int, int]] = {}
+        for matching, poly in states.items():
+            for weight, pairs in ((1, ((a, b), (c, dd))), (-1, ((a, dd), (b, c)))):
+                ends = dict(matching)
+                ends.update({y: x for x, y in matching})
+                loops = 0
+                for x, y in pairs:
+                    # ends maps each open edge end to the other open end of its partial strand
+                    ux, uy = ends.get(x), ends.get(y)
+                    if x == y or (ux is not None and ux == y):
+                        loops += 1  # the new arc closes a strand into a loop
+                        ends.pop(x, None)
+                        ends.pop(y, None)
+                    elif ux is not None and uy is not None:
+                        del ends[x], ends[y]
+                        ends[ux], ends[uy] = uy, ux
+                    elif ux is not None:
+                        del ends[x]
+                        ends[ux], ends[y] = y, ux
+                    elif uy is not None:
+                        del ends[y]
+                        ends[uy], ends[x] = x, uy
+                    else:
+                        ends[x], ends[y] = y, x
+                key = tuple(sorted((x, y) for x, y in ends.items() if x < y))
+                term = {e + weight: cf for e, cf in poly.items()}
+                for _ in range(loops):
+                    term = _loop_poly(term, _LOOP)
+                acc = new_states.setdefault(key, {})
+                for e, cf in term.items():
+                    acc[e] = acc.get(e, 0) + cf
+        states = {k: {e: c for e, c in v.items() if c} for k, v in new_states.items()}
+    total = states.get((), {})
+    # every state ends in at least one loop, so <K> counted d once too many: divide by d
+    return _divide_by_loop(total)
+
+
+def _divide_by_loop(poly: dict[int, int]) -> dict[int, int]:
+    """Exact division by ``d = -A^2 - A^-2 = -A^-2 (1 + A^4)``."""
+    if not poly:
+        raise ArithmeticError("Kauffman bracket vanished")
+    lo = min(poly)
+    coeffs = [0] * (max(poly) - lo + 1)
+    for e, c in poly.items():
+        coeffs[e - lo] = c
+    # divide by (1 + A^4), lowest degree first
+    q = [0] * max(len(coeffs) - 4, 0)
+    rem = coeffs[:]
+    for i in range(len(q)):
+        q[i] = rem[i]
+        rem[i] -= q[i]
+        rem[i + 4] -= q[i]
+    if any(rem):
+        raise ArithmeticError("Kauffman bracket is not divisible by the loop value")
+    # times -A^2 (the inverse of -A^-2)
+    return {lo + i + 2: -c for i, c in enumerate(q) if c}
+
+
+def jones_polynomial(code: GaussCode) -> tuple[tuple[int, int], ...]:
+    """Jones polynomial ``V(t) = (-A^3)^(-w) <K>`` at ``A = t^(-1/4)``: ``((exponent, coeff), ...)``."""
+    bracket = kauffman_bracket(code.pd_code())
+    w = code.writhe
+    factor_sign = -1 if w % 2 else 1
+    out = {}
+    for e, c in bracket.items():
+        a_exp = e - 3 * w
+        if a_exp % 4:
+            raise ArithmeticError("Jones polynomial has fractional exponents: the diagram is not a knot")
+        out[-a_exp // 4] = factor_sign * c
+    return tuple(sorted((e, c) for e, c in out.items() if c))
+
+
+def invariants(code: GaussCode) -> KnotType:
+    """The invariants of a closed diagram, named from the catalogue (``"unknown"`` outside it)."""
+    alexander = alexander_polynomial(code)
+    determinant = abs(sum(c * (-1) ** i for i, c in enumerate(alexander)))
+    jones = jones_polynomial(code)
+    name = _BY_INVARIANTS.get((alexander, jones), UNKNOWN)
+    return KnotType(name, alexander, determinant, jones, code.writhe)
+
+
+# ---------------------------------------------------------------------------------------------
+# Catalogue of knots up to five crossings
+
+
+def _entry(name: str, alexander: tuple[int, ...], jones: dict[int, int]) -> KnotType:
+    det = abs(sum(c * (-1) ** i for i, c in enumerate(alexander)))
+    return KnotType(name, alexander, det, tuple(sorted(jones.items())))
+
+
+def _mirror_jones(jones: dict[int, int]) -> dict[int, int]:
+    return {-e: c for e, c in jones.items()}
+
+
+# Jones polynomials of the positive (right-handed) versions; the "-" ones are their mirrors.
+_J31 = {1: 1, 3: 1, 4: -1}
+_J51 = {2: 1, 4: 1, 5: -1, 6: 1, 7: -1}
+_J52 = {1: 1, 2: -1, 3: 2, 4: -1, 5: 1, 6: -1}
+CATALOGUE: dict[str, KnotType] = {
+    k.name: k
+    for k in (
+        _entry("0_1", (1,), {0: 1}),
+        _entry("3_1+", (1, -1, 1), _J31),
+        _entry("3_1-", (1, -1, 1), _mirror_jones(_J31)),
+        _entry("4_1", (-1, 3, -1), {-2: 1, -1: -1, 0: 1, 1: -1, 2: 1}),
+        _entry("5_1+", (1, -1, 1, -1, 1), _J51),
+        _entry("5_1-", (1, -1, 1, -1, 1), _mirror_jones(_J51)),
+        _entry("5_2+", (2, -3, 2), _J52),
+        _entry("5_2-", (2, -3, 2), _mirror_jones(_J52)),
+    )
+}
+_BY_INVARIANTS = {(k.alexander, k.jones): k.name for k in CATALOGUE.values()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Identification
+
+
+@lru_cache(maxsize=1 << 16)
+def identify(p: PData) -> KnotType:
+    """The knot rope state ``p`` ties: closed under everything through its faces, then identified."""
+    return invariants(closed_gauss_code(parse_p_data(p)))
+
+
+def identify_points(points: npt.ArrayLike, depth_m: float = 1.0) -> KnotType:
+    """The knot a rope with these centreline points (head first, shape (N, 3)) ties.
+
+    Both ends are lowered ``depth_m`` below the table and joined there by a straight segment; the
+    closed polygon is projected to the table (its vertical drops project to the tips themselves).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
+        raise ValueError(f"points must have shape (N>=2, 3), got {pts.shape}")
+    low = min(float(pts[:, 2].min()), 0.0) - depth_m
+    tail_low = np.array([pts[-1, 0], pts[-1, 1], low])
+    head_low = np.array([pts[0, 0], pts[0, 1], low])
+    return invariants(gauss_code_from_polygon(np.vstack([pts, tail_low, head_low])))
+
+
+def knot_type_name(p: PData) -> str:
+    """Shorthand for ``identify(p).name`` (what the store's ``knot_type`` column holds)."""
+    return identify(p).name
+
+
+# ---------------------------------------------------------------------------------------------
+# Names a user may type
+
+
+class KnotNameError(ValueError):
+    """A knot name that is not in :data:`KNOT_NAMES`; the message lists the valid names."""
+
+
+KNOT_NAMES: dict[str, frozenset[str]] = {
+    "unknot": frozenset({"0_1"}),
+    "0_1": frozenset({"0_1"}),
+    "overhand": frozenset({"3_1+", "3_1-"}),
+    "trefoil": frozenset({"3_1+", "3_1-"}),
+    "3_1": frozenset({"3_1+", "3_1-"}),
+    "overhand+": frozenset({"3_1+"}),
+    "trefoil+": frozenset({"3_1+"}),
+    "3_1+": frozenset({"3_1+"}),
+    "overhand-": frozenset({"3_1-"}),
+    "trefoil-": frozenset({"3_1-"}),
+    "3_1-": frozenset({"3_1-"}),
+    "figure-eight": frozenset({"4_1"}),
+    "figure-8": frozenset({"4_1"}),
+    "4_1": frozenset({"4_1"}),
+    "5_1": frozenset({"5_1+", "5_1-"}),
+    "5_1+": frozenset({"5_1+"}),
+    "5_1-": frozenset({"5_1-"}),
+    "5_2": frozenset({"5_2+", "5_2-"}),
+    "5_2+": frozenset({"5_2+"}),
+    "5_2-": frozenset({"5_2-"}),
+}
+
+
+def resolve_knot(name: str) -> frozenset[str]:
+    """The canonical knot types a user's name stands for (``"overhand"`` -> ``{"3_1+", "3_1-"}``)."""
+    key = name.strip().lower()
+    if key in KNOT_NAMES:
+        return KNOT_NAMES[key]
+    raise KnotNameError(f"unknown knot name {name!r}; valid names: {', '.join(KNOT_NAMES)}")
+
+
+# ---------------------------------------------------------------------------------------------
+# States that tie a knot
+
+
+@lru_cache(maxsize=16)
+def _states_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
+    from twisted.moves import enumerate_states
+
+    out: dict[str, list[PData]] = {}
+    for p in enumerate_states(crossings)[crossings]:
+        out.setdefault(identify(p).name, []).append(p)
+    return {name: tuple(states) for name, states in out.items()}
+
+
+def states_tying(name: str, crossings: int | None = None, max_crossings: int = 4) -> list[PData]:
+    """Enumerated states (reachable by moves) with ``crossings`` crossings that tie knot ``name``.
+
+    ``crossings=None`` takes the smallest count up to ``max_crossings`` that has any such state (an
+    empty list when none does). The closure adds crossings, so that count can be below the knot's
+    crossing number: a 2-crossing rope whose head passes over, under, under, over (one sign) already
+    ties a trefoil once its ends are joined underneath. Enumerating 5-crossing
+    states takes tens of seconds, so it happens only when asked for (``crossings=5`` or
+    ``max_crossings=5``); results are cached per count. Sorted by key.
+    """
+    types = resolve_knot(name)
+    if crossings is not None:
+        if crossings < 0:
+            raise ValueError(f"crossings must be >= 0, got {crossings}")
+        counts: Iterable[int] = [crossings]
+    else:
+        # the closing arc passes under at most n segments of an n-crossing rope (it enters each of
+        # the n + 1 faces once), so a knot of crossing number c needs n >= c / 2 rope crossings
+        least = min(int(t.split("_")[0]) for t in types)
+        counts = range((least + 1) // 2, max_crossings + 1)
+    for c in counts:
+        by_type = _states_by_type(c)
+        found = sorted((p for t in types for p in by_type.get(t, ())), key=lambda p: p.key)
+        if found or crossings is not None:
+            return found
+    return []
