@@ -101,6 +101,35 @@ def problems_import(
     _print_sets(records)
 
 
+@problems_app.command("knots")
+def problems_knots(
+    ctx: typer.Context,
+    knots: Annotated[
+        list[str],
+        typer.Argument(help="Knots (see `twisted knots list`): NAME or NAME@CROSSINGS, e.g. overhand@3."),
+    ],
+    name: str = typer.Option(..., "--name", help="Name of the new set."),
+) -> None:
+    """Make a set of knot goals: each is reached by any rope state that ties the knot."""
+    from twisted.evaluate import EvalInputError, save_goal_sets
+    from twisted.goals import GoalError, goal_from_spec
+
+    goals = []
+    for i, knot in enumerate(knots, start=1):
+        if knot.strip().startswith("["):
+            fail(f"knot {i} ({knot!r}) is P-data: put P-data goals in a file for `twisted problems import`")
+        try:
+            goals.append(goal_from_spec(knot))
+        except GoalError as exc:
+            fail(f"knot {i} ({knot!r}): {exc}")
+    with _store(ctx) as store:
+        try:
+            records = save_goal_sets(store, {name: goals}, "knot")
+        except EvalInputError as exc:
+            fail(str(exc))
+    _print_sets(records)
+
+
 @problems_app.command("list")
 def problems_list(
     ctx: typer.Context,
@@ -116,7 +145,8 @@ def problems_list(
     if show and record is None:
         fail(f"no problem set {show!r}: see `twisted problems list`")
     if record is not None and as_json:
-        console.print_json(json.dumps([p.p_data.to_list() for p in record.problems]))
+        goals_json = [p.p_data.to_list() if p.spec is None else p.spec for p in record.problems]
+        console.print_json(json.dumps(goals_json))
         return
     table = Table("id", "set", "source", "seed", "goals", "cross", "frequency", "results")
     for s in sets:
@@ -134,7 +164,7 @@ def problems_list(
     if record is not None:
         goals = Table("#", "goal", "cross", "frequency", "tag")
         for p in record.problems:
-            goals.add_row(str(p.idx), p.p_data.key, str(p.p_data.cross), str(p.frequency), p.tag)
+            goals.add_row(str(p.idx), p.goal_key, str(p.p_data.cross), str(p.frequency), p.tag)
         console.print(goals)
 
 

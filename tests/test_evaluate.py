@@ -30,6 +30,7 @@ from twisted.evaluate import (
     success_curve,
     write_report,
 )
+from twisted.goals import state_goal
 from twisted.moves import enumerate_states
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, EvalRun, ProblemRecord, load_problem_set, save_problem_set
@@ -159,13 +160,15 @@ def test_goal_file_errors_name_the_entry() -> None:
         parse_goal_file(json.dumps({"a": [good], "b": [good, bad]}), "mine")
     with pytest.raises(EvalInputError, match="entry 0: the empty rope"):
         parse_goal_file("[[]]", "x")
-    with pytest.raises(EvalInputError, match="entry 1: same state as entry 0"):
+    with pytest.raises(EvalInputError, match="entry 1: same goal as entry 0"):
         parse_goal_file(json.dumps([good, good]), "x")
     with pytest.raises(EvalInputError, match="needs a set name"):
         parse_goal_file(json.dumps([good]))
     with pytest.raises(EvalInputError, match="not valid JSON"):
         parse_goal_file("[[1,", "x")
-    assert parse_goal_file(json.dumps({"a": [good]})) == {"a": [ONE]}
+    with pytest.raises(EvalInputError, match=r"set 'x' entry 0: .*knot"):
+        parse_goal_file(json.dumps(["granny-knot"]), "x")
+    assert parse_goal_file(json.dumps({"a": [good]})) == {"a": [state_goal(ONE)]}
 
 
 def test_import_cli_reports_bad_entry_and_stores_nothing(db_url: str, tmp_path: Path) -> None:

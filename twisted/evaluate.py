@@ -52,6 +52,8 @@ import numpy.typing as npt
 from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
+from twisted.goals import Goal, state_goal
+from twisted.moves import parse_state
 from twisted.store.experiments import (
     FINISHED_STATUSES,
     DiscretisationResult,
@@ -78,6 +80,8 @@ __all__ = [
     "FOUR_SET",
     "PAPER_DISCRETISATION_CHANGED",
     "UNSEEN_SET",
+    "goal_problems",
+    "save_goal_sets",
     "DiscretisationSummary",
     "EvalInputError",
     "EvalSummary",
@@ -271,13 +275,15 @@ def make_problem_sets_in_store(
         return [r for name in drawn if (r := load_problem_set(session, f"{prefix}{name}")) is not None]
 
 
-def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[PData]]:
-    """Goals from JSON: a list of P-data (one set called ``name``) or an object of named lists.
+def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]:
+    """Goals from JSON: a list of goals (one set called ``name``) or an object of named lists.
 
-    For an object the sets are called by their keys, prefixed ``name-`` when a name is given.
-    Every state is checked; the first bad one raises :class:`EvalInputError` naming set and index.
+    A goal is P-data, or a knot (``"overhand"``, ``"figure-eight@4"``: any state of that many crossings,
+    default the fewest, that ties it). For an object the sets are called by their keys, prefixed
+    ``name-`` when a name is given. Every goal is checked; the first bad one raises
+    :class:`EvalInputError` naming set and index.
     """
-    from twisted.moves import parse_state
+    from twisted.goals import GoalError, goal_from_spec
 
     try:
         data = json.loads(text)
@@ -293,51 +299,77 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[PData]
         named = {(f"{name}-{k}" if name else str(k)): v for k, v in data.items()}
     else:
         raise EvalInputError(
-            "goal file must hold a JSON list of P-data or an object of named lists, "
+            "goal file must hold a JSON list of goals or an object of named lists, "
             f"got {type(data).__name__}"
         )
-    out: dict[str, list[PData]] = {}
+    out: dict[str, list[Goal]] = {}
     for set_name, goals in named.items():
         if not set_name or len(set_name) > 64:
             raise EvalInputError(f"set name {set_name!r} must have 1 to 64 characters")
         if not isinstance(goals, list) or not goals:
-            raise EvalInputError(f"set {set_name!r}: expected a non-empty list of P-data states")
+            raise EvalInputError(f"set {set_name!r}: expected a non-empty list of goals (P-data or knots)")
         seen: dict[str, int] = {}
         parsed = []
-        for i, goal in enumerate(goals):
+        for i, entry in enumerate(goals):
+            where = f"set {set_name!r} entry {i}"
             # A list of entries that all are lists is a state; anything else is reported as malformed.
             try:
-                p = parse_state(goal, f"set {set_name!r} entry {i}")
+                if isinstance(entry, str):
+                    goal = goal_from_spec(entry)
+                else:
+                    goal = state_goal(parse_state(entry, where))
+            except GoalError as exc:
+                raise EvalInputError(f"{where}: {exc}") from None
             except PDataError as exc:
                 raise EvalInputError(str(exc)) from None
-            if p.cross == 0:
-                raise EvalInputError(f"set {set_name!r} entry {i}: the empty rope [] is not a goal")
-            if p.key in seen:
-                raise EvalInputError(
-                    f"set {set_name!r} entry {i}: same state as entry {seen[p.key]} ({p.key})"
-                )
-            seen[p.key] = i
-            parsed.append(p)
+            if goal.cross == 0:
+                raise EvalInputError(f"{where}: the empty rope [] is not a goal")
+            if goal.spec in seen:
+                raise EvalInputError(f"{where}: same goal as entry {seen[goal.spec]} ({goal.spec})")
+            seen[goal.spec] = i
+            parsed.append(goal)
         out[set_name] = parsed
     return out
+
+
+def goal_problems(
+    goals: Sequence[Goal], frequencies: Mapping[str, tuple[PData, int]], tag: str
+) -> list[ProblemRecord]:
+    """Problem records for ``goals``; a goal's frequency counts the transitions reaching any of its states."""
+    return [
+        ProblemRecord(
+            None,
+            i,
+            goal.representative,
+            sum(frequencies.get(p.key, (p, 0))[1] for p in goal.states),
+            tag,
+            spec=goal.spec if goal.knot is not None else None,
+        )
+        for i, goal in enumerate(goals)
+    ]
 
 
 def import_problem_sets(store: Any, text: str, name: str | None = None) -> list[ProblemSetRecord]:
     """Validate a goal file completely, then store all its sets in one transaction (or none)."""
     goals = parse_goal_file(text, name)
+    return save_goal_sets(store, goals, "imported")
+
+
+def save_goal_sets(store: Any, goals: Mapping[str, Sequence[Goal]], tag: str) -> list[ProblemSetRecord]:
+    """Store new problem sets of the given goals (``source = 'imported'``) in one transaction, or none."""
     with store.session() as session:
         frequencies = state_frequencies(session)
     with store.session(write=True) as session:
         for set_name in goals:
             if session.scalar(select(ProblemSet.id).where(ProblemSet.name == set_name)) is not None:
                 raise EvalInputError(f"problem set {set_name!r} exists already: import under another --name")
-        for set_name, states in goals.items():
-            problems = [
-                ProblemRecord(None, i, p, frequencies.get(p.key, (p, 0))[1], "imported")
-                for i, p in enumerate(states)
-            ]
+        for set_name, set_goals in goals.items():
             save_problem_set(
-                session, set_name, problems, source="imported", parameters={"goals": len(states)}
+                session,
+                set_name,
+                goal_problems(set_goals, frequencies, tag),
+                source="imported",
+                parameters={"goals": len(set_goals)},
             )
     with store.session() as session:
         return [r for set_name in goals if (r := load_problem_set(session, set_name)) is not None]

@@ -2,7 +2,7 @@
 
 A goal is a set of topological states; a search succeeds when it reaches any member. ``--goal`` gives a
 set of one; ``--knot overhand [--crossings N]`` gives the enumerated states of N crossings (default: the
-fewest that tie it) whose closure is that knot (:func:`twisted.knots.states_tying`).
+knot's crossing number) whose closure is that knot (:func:`twisted.knots.states_tying`).
 
 Goals are written as one line of text, the *goal spec*, wherever a goal must be stored or passed on:
 the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@<crossings>`` for a knot
@@ -18,7 +18,7 @@ from typing import Any
 
 from twisted.topology import PData
 
-__all__ = ["Goal", "GoalError", "KNOT_PREFIX", "goal_from_spec", "knot_goal", "state_goal"]
+__all__ = ["Goal", "GoalError", "KNOT_PREFIX", "crossing_number", "goal_from_spec", "knot_goal", "state_goal"]
 
 KNOT_PREFIX = "knot:"
 # Knots are searched among enumerated states; 5 crossings already takes ~25 s to enumerate, and the
@@ -87,8 +87,21 @@ def state_goal(p_data: PData) -> Goal:
     return Goal(_sorted([p_data]))
 
 
+def crossing_number(name: str) -> int:
+    """The least crossings of a diagram of knot ``name`` (3 for the overhand knot, 0 for the unknot)."""
+    from twisted.knots import resolve_knot
+
+    return min(int(t.split("_")[0]) for t in resolve_knot(name))
+
+
 def knot_goal(name: str, crossings: int | None = None) -> Goal:
-    """Every enumerated state of ``crossings`` crossings (default: the fewest possible) that ties ``name``."""
+    """Every enumerated state of ``crossings`` crossings that ties ``name``.
+
+    The default is the knot's crossing number (3 for the overhand knot). Ropes with fewer crossings can
+    tie the knot too, but only through the closing arc (the end lies inside a loop and passes under it
+    once lowered below the table): the rope on the table does not show the knot. Ask for them with
+    ``crossings`` (``twisted knots list`` shows the smallest counts).
+    """
     from twisted.knots import KnotNameError, resolve_knot, states_tying
 
     try:
@@ -97,30 +110,40 @@ def knot_goal(name: str, crossings: int | None = None) -> Goal:
         raise GoalError(str(exc)) from None
     if crossings is not None and not 1 <= crossings <= MAX_KNOT_CROSSINGS:
         raise GoalError(f"--crossings must be 1 to {MAX_KNOT_CROSSINGS} for a knot goal, got {crossings}")
-    states = [p for p in states_tying(name, crossings) if p.cross > 0]
+    if crossings is None:
+        crossings = crossing_number(name)
+        if crossings == 0:
+            raise GoalError(f"{name!r} is the straight rope itself: give a knot with crossings")
+    states = [p for p in states_tying(name, crossings, max_crossings=MAX_KNOT_CROSSINGS) if p.cross > 0]
     if not states:
         where = f"with {crossings}" if crossings is not None else f"with up to {MAX_KNOT_CROSSINGS}"
         where += " crossings"
         raise GoalError(f"no rope state {where} ties the knot {name!r}")
-    if crossings is None:
-        crossings = states[0].cross
-    if any(p.cross != crossings for p in states) or crossings > MAX_KNOT_CROSSINGS:
-        raise GoalError(f"knot {name!r} needs more than {MAX_KNOT_CROSSINGS} crossings")
     return Goal(_sorted(states), knot=name, crossings=crossings)
 
 
 def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
-    """A goal from its spec: ``Goal``, P-data (text, list or PData) or ``knot:<name>@<crossings>``."""
+    """A goal from its spec: ``Goal``, P-data (text, list or PData) or ``knot:<name>@<crossings>``.
+
+    Where people write goals (goal files) a knot may also be given as ``<name>`` or ``<name>@<crossings>``
+    (``overhand``, ``figure-eight@4``): any text that does not start with ``[``.
+    """
     from twisted.moves import parse_state
     from twisted.topology import PDataError
 
     if isinstance(spec, Goal):
         return spec
-    if isinstance(spec, str) and spec.strip().startswith(KNOT_PREFIX):
-        match = _KNOT_SPEC.match(spec.strip())
+    if isinstance(spec, str) and not spec.strip().startswith("["):
+        text = spec.strip()
+        written = text if text.startswith(KNOT_PREFIX) else KNOT_PREFIX + text
+        match = _KNOT_SPEC.match(written) or _KNOT_SPEC.match(written + "@0")
         if match is None:
-            raise GoalError(f"knot goal {spec!r} must read knot:<name>@<crossings>, e.g. knot:overhand@3")
-        return knot_goal(match["name"], int(match["crossings"]))
+            raise GoalError(
+                f"goal {spec!r} is neither P-data nor a knot: write a knot as <name>, <name>@<crossings> "
+                "or knot:<name>@<crossings>, e.g. overhand@3"
+            )
+        crossings = int(match["crossings"])
+        return knot_goal(match["name"], crossings if crossings > 0 else None)
     try:
         return state_goal(parse_state(spec, "goal"))
     except PDataError as exc:

@@ -1,0 +1,175 @@
+"""Goal sets: plan to "an overhand knot" (any state that ties it) instead of to one P-data state."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select
+from typer.testing import CliRunner
+
+from cli.main import app
+from twisted.evaluate import parse_goal_file
+from twisted.goals import Goal, GoalError, goal_from_spec, knot_goal, state_goal
+from twisted.knots import identify
+from twisted.moves import enumerate_states
+from twisted.planner import PlanInputError, high_level, make_goal, replay
+from twisted.store import open_store
+from twisted.store.experiments import EvalResult, load_problem_set
+from twisted.store.search import SearchRunRow, find_resumable_run, load_run
+from twisted.topology import EMPTY, parse_p_data
+
+runner = CliRunner()
+ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
+
+
+def _cli(db: str, *args: str) -> tuple[int, str]:
+    result = runner.invoke(app, ["--db", db, *args])
+    return result.exit_code, result.output
+
+
+# --- the goal itself --------------------------------------------------------------------------------
+
+
+def test_overhand_goal_is_every_three_crossing_trefoil() -> None:
+    goal = knot_goal("overhand")
+    assert goal.knot == "overhand" and goal.crossings == 3 and goal.cross == 3
+    assert goal.spec == "knot:overhand@3"
+    assert all(p.cross == 3 and identify(p).name in ("3_1+", "3_1-") for p in goal.states)
+    # ... and nothing else among the 3-crossing states
+    others = [p for p in enumerate_states(3)[3] if p not in goal]
+    assert others and not any(identify(p).name.startswith("3_1") for p in others)
+    # one chirality is half of it
+    right = knot_goal("overhand+")
+    assert set(right.keys) < set(goal.keys)
+    assert {identify(p).name for p in right.states} == {"3_1+"}
+
+
+def test_fewer_crossings_than_the_knot_only_when_asked() -> None:
+    # two crossings tie a trefoil through the closing arc only (the end tucked inside a loop)
+    two = knot_goal("overhand", 2)
+    assert two.crossings == 2 and two.states and all(p.cross == 2 for p in two.states)
+    assert knot_goal("figure-eight").crossings == 4
+
+
+def test_specs_round_trip_and_name_the_bad_part() -> None:
+    for goal in (knot_goal("overhand"), knot_goal("figure-eight", 4), state_goal(parse_p_data(ONE_CROSSING))):
+        assert goal_from_spec(goal.spec) == goal
+    assert goal_from_spec("figure-eight@4") == knot_goal("figure-eight", 4)
+    assert goal_from_spec("overhand") == knot_goal("overhand")
+    with pytest.raises(GoalError, match="unknown knot name 'granny'.*overhand"):
+        goal_from_spec("granny")
+    with pytest.raises(GoalError, match="crossings must be 1 to 5"):
+        knot_goal("overhand", 6)
+    with pytest.raises(GoalError, match="straight rope"):
+        knot_goal("unknot")
+    with pytest.raises(GoalError, match="no rope state with 1 crossings ties"):
+        knot_goal("figure-eight", 1)
+    with pytest.raises(PlanInputError, match="exactly one goal"):
+        make_goal(ONE_CROSSING, knot="overhand")
+    with pytest.raises(PlanInputError, match="--crossings goes with --knot"):
+        make_goal(ONE_CROSSING, crossings=3)
+
+
+def test_high_level_plans_lead_to_members_and_members_take_turns(sqlite_url: str) -> None:
+    goal = knot_goal("overhand")
+    with open_store(sqlite_url) as store:
+        found = high_level(store, goal, 20)(EMPTY)
+    assert len(found) == 20
+    assert all(plan.states[0] == EMPTY and plan.states[-1] in goal for plan in found)
+    lengths = [len(plan.moves) for plan in found]
+    assert lengths == sorted(lengths)
+    # not all from the first member: the shortest plans of many members come first
+    assert len({plan.states[-1].key for plan in found}) > 5
+
+
+def test_goal_files_take_knot_names() -> None:
+    sets = parse_goal_file(json.dumps({"knots": ["overhand", "figure-eight@4"], "states": [ONE_CROSSING]}))
+    assert sets["knots"] == [knot_goal("overhand"), knot_goal("figure-eight", 4)]
+    assert sets["states"] == [state_goal(parse_p_data(ONE_CROSSING))]
+    assert isinstance(sets["knots"][0], Goal)
+
+
+# --- planning to a knot, end to end -------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_plan_to_an_overhand_knot_solves_replays_and_is_stored(tmp_path: Path) -> None:
+    db = f"sqlite:///{tmp_path / 'knot.db'}"
+    code, out = _cli(db, "plan", "--knot", "overhand", "--workers", "1", "--timeout", "240", "--json")
+    assert code == 0, out
+    result = json.loads(out)
+    assert result["solved"] and result["goal"] == "knot:overhand@3" and result["knot"] == "overhand"
+    reached = parse_p_data(result["reached_state"])
+    assert result["plan"][-1]["state"] == result["reached_state"]
+    assert reached.cross == 3 and identify(reached).name in ("3_1+", "3_1-")
+    with open_store(db) as store:
+        info = load_run(store, result["run_id"], with_nodes=False)
+        assert info is not None and info.goal == knot_goal("overhand")
+        replayed = replay(store, result["run_id"])
+        assert replayed.reached_goal and all(step.matches for step in replayed.steps)
+        with store.session() as session:
+            row = session.scalar(select(SearchRunRow).where(SearchRunRow.run_id == result["run_id"]))
+            assert row is not None and row.goal_knot == "overhand" and row.goal_cross == 3
+    code, out = _cli(db, "replay", str(result["run_id"]))
+    assert code == 0 and "reaches the goal overhand" in out
+
+
+def test_knot_runs_resume_by_knot_and_refuse_another_goal(db_url: str) -> None:
+    db = db_url
+    args = ["--planner", "random-low", "--workers", "1", "--p-expand", "0", "--k", "1", "--json"]
+    code, out = _cli(db, "plan", "--knot", "figure-eight", "--max-iterations", "1", *args)
+    assert code == 3, out
+    run_id = json.loads(out)["run_id"]
+    with open_store(db) as store:
+        assert find_resumable_run(store, knot_goal("figure-eight")) == run_id
+        assert find_resumable_run(store, knot_goal("overhand")) is None
+        assert find_resumable_run(store, state_goal(knot_goal("figure-eight").representative)) is None
+    code, out = _cli(db, "plan", "--resume", "--knot", "overhand", "--timeout", "1")
+    assert code == 2 and "no unfinished planner run for goal knot:overhand@3" in out
+    code, out = _cli(db, "plan", "--resume", str(run_id), "--goal", ONE_CROSSING, "--timeout", "1")
+    assert code == 2 and "knot:figure-eight@4" in out
+    code, out = _cli(db, "plan", "--resume", "--knot", "figure-eight", "--max-iterations", "2", "--json")
+    assert code == 3 and json.loads(out)["run_id"] == run_id
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--knot", "granny"], "unknown knot name"),
+        (["--knot", "overhand", "--goal", ONE_CROSSING], "exactly one goal"),
+        (["--goal", ONE_CROSSING, "--crossings", "3"], "--crossings goes with --knot"),
+        (["--knot", "overhand", "--crossings", "9"], "crossings must be 1 to 5"),
+        (["--knot", "figure-eight", "--crossings", "1"], "no rope state"),
+    ],
+)
+def test_bad_knot_goals_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
+    code, out = _cli(f"sqlite:///{tmp_path / 'bad.db'}", "plan", *args, "--timeout", "1")
+    assert code == 2 and message in " ".join(out.split()), out
+
+
+def test_problem_sets_of_knots_feed_eval(tmp_path: Path) -> None:
+    db = f"sqlite:///{tmp_path / 'sets.db'}"
+    code, out = _cli(db, "problems", "knots", "overhand", "figure-eight@4", "--name", "knots")
+    assert code == 0, out
+    code, out = _cli(db, "problems", "knots", "granny", "--name", "bad")
+    assert code == 2 and "knot 1 ('granny')" in out
+    with open_store(db) as store:
+        with store.session() as session:
+            record = load_problem_set(session, "knots")
+            assert load_problem_set(session, "bad") is None
+        assert record is not None
+        assert [p.goal_key for p in record.problems] == ["knot:overhand@3", "knot:figure-eight@4"]
+        assert [p.p_data.cross for p in record.problems] == [3, 4]
+    code, out = _cli(db, "problems", "list", "--show", "knots", "--json")
+    assert code == 0 and json.loads(out) == ["knot:overhand@3", "knot:figure-eight@4"]
+    # one overhand goal, random-low, one seed: the result is stored under the knot's spec
+    code, out = _cli(
+        db, "eval", "--set", "knots", "--planner", "random-low", "--timeout", "3", "--parallel", "1"
+    )
+    assert code == 0, out
+    with open_store(db) as store, store.session() as session:
+        rows = list(session.scalars(select(EvalResult)))
+        assert sorted(r.goal_key for r in rows) == ["knot:figure-eight@4", "knot:overhand@3"]
+        assert all(r.status in ("solved", "timeout") and r.plan_run_id is not None for r in rows)
