@@ -18,6 +18,8 @@ from twisted.store import open_store  # noqa: E402
 from twisted.store.rl import RlCheckpoint, RlRun, list_checkpoints, success_table  # noqa: E402
 from twisted.topology import parse_p_data  # noqa: E402
 
+ONE = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
+
 SMALL = SacConfig(
     total_steps=240,
     seed=3,
@@ -114,3 +116,28 @@ def test_missing_policy_errors_name_what_to_do(sqlite_url: str) -> None:
             train_sac(store, SacConfig(total_steps=0))
         with store.session() as session:
             assert session.scalar(select(func.count()).select_from(RlRun)) == 0
+
+
+def test_cli_train_list_and_bad_input(sqlite_url: str) -> None:
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    runner = CliRunner()
+    empty = runner.invoke(app, ["--db", sqlite_url, "rl", "list"])
+    assert empty.exit_code == 0 and "no SAC runs" in empty.output
+    bad = runner.invoke(app, ["--db", sqlite_url, "rl", "train", "--goal", '[[1,"O",1,"+"]]', "--steps", "5"])
+    assert bad.exit_code == 2 and "goal #0" in bad.output
+    crossings = runner.invoke(app, ["--db", sqlite_url, "rl", "train", "--goal-crossings", "1,x"])
+    assert crossings.exit_code == 2 and "--goal-crossings" in crossings.output
+    args = ["--steps", "40", "--learning-starts", "20", "--batch-size", "16", "--log-every", "20"]
+    ok = runner.invoke(app, ["--db", sqlite_url, "rl", "train", *args, "--max-curves", "2", "--goal", ONE])
+    assert ok.exit_code == 0, ok.output
+    text = " ".join(ok.output.split())  # rich wraps lines
+    assert "run 1 finished: 40 steps" in text
+    listed = runner.invoke(app, ["--db", sqlite_url, "rl", "list"])
+    assert listed.exit_code == 0 and "40/40" in listed.output
+    with open_store(sqlite_url) as store, store.session() as session:
+        (final,) = [c for c in list_checkpoints(session) if c.final]
+        assert session.get(RlRun, 1).parameters["goals"] == [ONE]
+    assert f"--model {final.id}" in text

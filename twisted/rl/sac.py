@@ -27,7 +27,7 @@ from twisted.store.db import Store
 from twisted.store.models import utcnow
 from twisted.store.rl import RlCheckpoint, RlRun, add_checkpoint, add_success
 
-__all__ = ["RlProgress", "SacConfig", "SacOutcome", "make_env", "require_rl", "train_sac"]
+__all__ = ["RlProgress", "SacConfig", "SacOutcome", "evaluate_policy", "make_env", "require_rl", "train_sac"]
 
 
 def require_rl() -> None:
@@ -188,11 +188,14 @@ def train_sac(
     *,
     resume_run_id: int | None = None,
     progress: Callable[[RlProgress], None] | None = None,
+    time_limit_s: float | None = None,
 ) -> SacOutcome:
     """Train (or, with ``resume_run_id``, continue) a SAC+HER policy; see the module docstring.
 
     On KeyboardInterrupt a checkpoint is stored, the run marked ``interrupted`` and the interrupt
-    re-raised. Raises ValueError for bad settings or an unknown / finished run to resume.
+    re-raised. After ``time_limit_s`` seconds (of this call) training stops at the next step with a
+    checkpoint and status ``interrupted`` (resumable). Raises ValueError for bad settings or an
+    unknown / finished run to resume.
     """
     require_rl()
     from stable_baselines3.common.callbacks import BaseCallback
@@ -200,6 +203,11 @@ def train_sac(
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     resume_row: RlCheckpoint | None = None
+    if resume_run_id is None:
+        # settings and goals are checked before a run row exists, so bad input leaves no trace
+        config = config or SacConfig()
+        config.validate()
+        env = make_env(config, _url(store))
     with store.session(write=True) as session:
         if resume_run_id is not None:
             run = session.get(RlRun, resume_run_id)
@@ -227,8 +235,7 @@ def train_sac(
                 run.steps_done, run.episodes, run.elapsed_s = 0, 0, 0.0
             run.status, run.message, run.ended_at = "running", None, None
         else:
-            config = config or SacConfig()
-            config.validate()
+            assert config is not None
             run = RlRun(
                 status="running",
                 seed=config.seed,
@@ -245,7 +252,8 @@ def train_sac(
         steps_at_start, episodes_at_start, elapsed_at_start = run.steps_done, run.episodes, run.elapsed_s
         metrics = dict(run.metrics or {})
 
-    env = make_env(config, _url(store))
+    if resume_run_id is not None:
+        env = make_env(config, _url(store))
     vec_env = DummyVecEnv([lambda: Monitor(env)])
     if resume_row is not None:
         model = _load_model(resume_row, vec_env)
@@ -326,6 +334,9 @@ def train_sac(
                 log_interval()
             if steps % config.checkpoint_every == 0 and steps < config.total_steps:
                 save("running")
+            if time_limit_s is not None and time.monotonic() - started >= time_limit_s:
+                state["timed_out"] = 1
+                return False  # SB3 ends learn() here
             return True
 
     remaining = config.total_steps - steps_at_start
@@ -349,13 +360,56 @@ def train_sac(
         vec_env.close()
     if interval:
         log_interval()
-    checkpoint_id = save("finished", final=True)
+    status = "interrupted" if state.get("timed_out") else "finished"
+    message = f"time limit {time_limit_s} s reached; continue with `twisted rl train --resume RUN`"
+    checkpoint_id = save(
+        status, final=status == "finished", message=message if status != "finished" else None
+    )
     return SacOutcome(
         run_id=run_id,
-        status="finished",
+        status=status,
         steps=int(model.num_timesteps),
         episodes=state["episodes"],
         elapsed_s=elapsed(),
         checkpoint_id=checkpoint_id,
         success={k: (v[0], v[1]) for k, v in cumulative.items()},
     )
+
+
+def evaluate_policy(
+    model: Any,
+    config: SacConfig,
+    episodes_per_cross: int,
+    *,
+    seed: int = 0,
+    deterministic: bool = True,
+    db_url: str | None = None,
+) -> dict[int, tuple[int, int]]:
+    """``{goal crossings: (episodes, successes)}`` of the policy alone from the straight rope.
+
+    For each crossing count in the run's goal pool, ``episodes_per_cross`` episodes with goals drawn
+    uniformly from that count (seeded), each up to ``config.max_curves`` curves.
+    """
+    import numpy as np
+
+    env = make_env(config, db_url)
+    rng = np.random.default_rng(seed)
+    by_cross: dict[int, list[Any]] = {}
+    for p in env.goals:
+        by_cross.setdefault(p.cross, []).append(p)
+    out: dict[int, tuple[int, int]] = {}
+    for cross in sorted(by_cross):
+        pool = by_cross[cross]
+        hits = 0
+        for i in range(episodes_per_cross):
+            goal = pool[int(rng.integers(len(pool)))]
+            obs, info = env.reset(seed=seed + i, options={"goal": goal})
+            done = False
+            while not done:
+                action, _ = model.predict(obs, deterministic=deterministic)
+                obs, _, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+            hits += int(info["is_success"])
+        out[cross] = (episodes_per_cross, hits)
+    env.close()
+    return out
