@@ -16,7 +16,11 @@ the root of ``T`` to the goal node.
 Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
 the same high-level plans with uniformly random curves (the paper's "low+high level");
 ``low-level-only`` applies random curves to random nodes of ``T`` with no topological guidance
-beyond the goal test.
+beyond the goal test; ``sac`` follows the high-level plans like ``twisted`` with a SAC+HER policy
+(``twisted rl train``) in place of the inverse model, as in the paper's comparison.
+
+The goal is a set of states (:class:`twisted.goals.Goal`): one P-data state, or every state that ties
+a named knot; the search succeeds on reaching any member.
 
 Everything random goes through one ``numpy.random.Generator``; simulation results come back in
 the order the curves were sampled (``SimPool`` preserves order), so a run replays from its seed

@@ -465,6 +465,7 @@ def render_run(
     states the planner reached; ``twisted replay`` re-simulates them). Each frame shows the next
     curve as an arrow.
     """
+    from twisted.knots import knot_type_name
     from twisted.store.search import load_run, solution_path
 
     info = load_run(store, run_id, with_nodes=False)
@@ -480,7 +481,10 @@ def render_run(
         node = path[i]
         fig, _, ax = _panel_figure(images[i] if images else None)
         what = "start" if i == 0 else f"after curve {i}/{n_steps}"
-        goal_mark = "  = goal" if node.p_data in info.goal else ""
+        goal_mark = ""
+        if node.p_data in info.goal:
+            tied = f" ({info.goal.knot}: {knot_type_name(node.p_data)})" if info.goal.knot else ""
+            goal_mark = f"  = goal{tied}"
         draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
         next_curve = path[i + 1].curve if i < n_steps else None
         if next_curve is not None:
