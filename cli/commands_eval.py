@@ -283,7 +283,9 @@ def _default_parallel() -> int:
 def eval_command(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set (see `twisted problems list`)."),
-    planner: str = typer.Option("twisted", "--planner", help="twisted, random-low or low-level-only."),
+    planner: str = typer.Option(
+        "twisted", "--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."
+    ),
     timeout_s: float = typer.Option(
         1800.0, "--timeout", help="Search time per goal in seconds (paper: 1800)."
     ),
@@ -294,7 +296,9 @@ def eval_command(
     friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (0.95/1.05)."),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
     heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
-    model_id: int = typer.Option(None, "--model", help="Inverse model id for `twisted` (default: newest)."),
+    model_id: int = typer.Option(
+        None, "--model", help="Inverse model id (twisted) or policy checkpoint id (sac); default: the newest."
+    ),
     label: str = typer.Option(
         None, "--label", help="Name the results are stored under (default: planner[-heuristic])."
     ),

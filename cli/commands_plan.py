@@ -107,7 +107,10 @@ def plan_command(
         None, "--plan-limit", min=1, help="High-level plans kept per reached state (100)."
     ),
     model_id: int | None = typer.Option(
-        None, "--model", help="Model id (default: the newest in the database, else the shipped one)."
+        None,
+        "--model",
+        help="Model id (twisted: default the newest in the database, else the shipped one; "
+        "sac: policy checkpoint id, default the newest).",
     ),
     start_config: int | None = typer.Option(
         None, "--start-config", help="Start from this configurations.id instead of the straight rope."
