@@ -239,7 +239,7 @@ class RopeKnotEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.sim = RopeSim(friction_scale=friction_scale)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         goal_box = spaces.Box(-1.0, 1.0, shape=(P_DATA_DIM,), dtype=np.float32)
-        self.observation_space = spaces.Dict(
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {
                 "observation": spaces.Box(-np.inf, np.inf, shape=(OBSERVATION_DIM,), dtype=np.float32),
                 "achieved_goal": goal_box,

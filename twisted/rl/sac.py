@@ -264,6 +264,8 @@ def train_sac(
         model = _new_model(config, vec_env)
         steps_at_start = 0
 
+    assert config is not None  # set above, from the argument or the resumed run
+    cfg: SacConfig = config
     started = time.monotonic()
     cumulative: dict[int, list[int]] = {
         int(k): list(v) for k, v in (metrics.get("success_by_goal_cross") or {}).items()
@@ -330,9 +332,9 @@ def train_sac(
                         counts[1] += hit
                     state["episodes"] += 1
             steps = int(self.num_timesteps)
-            if steps % config.log_every == 0:
+            if steps % cfg.log_every == 0:
                 log_interval()
-            if steps % config.checkpoint_every == 0 and steps < config.total_steps:
+            if steps % cfg.checkpoint_every == 0 and steps < cfg.total_steps:
                 save("running")
             if time_limit_s is not None and time.monotonic() - started >= time_limit_s:
                 state["timed_out"] = 1
