@@ -393,7 +393,7 @@ def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool
 
 
 @contextmanager
-def _stop_on_signals(on_signal: Callable[[int], None]) -> Iterator[None]:
+def stop_on_signals(on_signal: Callable[[int], None]) -> Iterator[None]:
     """Route SIGINT/SIGTERM to ``on_signal`` while collecting (main thread only); restore afterwards."""
     import threading
 
@@ -453,7 +453,7 @@ def collect(
             raise KeyboardInterrupt  # a second signal: stop now, without waiting for the workers
 
     try:
-        with _stop_on_signals(on_signal):
+        with stop_on_signals(on_signal):
             ensure_root(store, run_id, options.friction_scale)
             deadline = time.time() + total_s
             seeds = np.random.SeedSequence([seed, run_id]).spawn(options.workers)

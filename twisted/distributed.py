@@ -58,10 +58,10 @@ from twisted.collect import (
     CollectProgress,
     CollectSummary,
     DQIndex,
-    _stop_on_signals,
     ensure_root,
     make_batch,
     record_curve,
+    stop_on_signals,
 )
 from twisted.store import CollectBatch, Configuration, Run, Store, Transition, open_store
 from twisted.store.db import sqlite_path
@@ -391,7 +391,7 @@ def _collect(
         pending[actors[worker].run_batch.remote(seq, seconds)] = (worker, seq)
 
     try:
-        with _stop_on_signals(on_signal):
+        with stop_on_signals(on_signal):
             ensure_root(store, run_id, options.friction_scale)
             actor_class = ray.remote(num_cpus=1, max_restarts=max_restarts, max_task_retries=max_restarts)(
                 CollectWorker
