@@ -72,6 +72,7 @@ __all__ = [
     "invariants",
     "knot_type_name",
     "resolve_knot",
+    "simplify",
     "states_tying",
 ]
 
@@ -175,6 +176,53 @@ class GaussCode:
             else:
                 pd.append((e["under_in"], e["over_in"], e["under_out"], e["over_out"]))
         return pd
+
+
+def simplify(code: GaussCode) -> GaussCode:
+    """Remove Reidemeister I loops and II bigons until none is left (the knot type is kept).
+
+    R1: a crossing whose two passages follow each other along the knot. The loop between them holds
+    no crossing, and the crossing's two other ends lie on one side of it, so on the sphere the loop
+    bounds an empty disc. R2: crossings ``a, b`` of opposite signs passed over-over consecutively by
+    one strand and under-under consecutively by another. The two edges between them form a closed
+    curve without crossings; the rest of the knot is one arc, so it attaches to ``a`` and ``b`` from
+    the same side of that curve, the other side is an empty bigon, and the over strand lifts off.
+    """
+    events, signs = list(code.events), list(code.signs)
+    changed = True
+    while changed and events:
+        changed = False
+        m = len(events)
+        where = {(c, over): i for i, (c, over) in enumerate(events)}
+        drop: set[int] = set()
+        for i in range(m):
+            a, b = events[i], events[(i + 1) % m]
+            if a[0] == b[0]:
+                drop = {a[0]}
+                break
+            if a[1] and b[1] and signs[a[0]] == -signs[b[0]]:
+                ua, ub = where[(a[0], False)], where[(b[0], False)]
+                if (ua - ub) % m in (1, m - 1):
+                    drop = {a[0], b[0]}
+                    break
+        if drop:
+            changed = True
+            kept = [c for c in range(len(signs)) if c not in drop]
+            renumber = {old: new for new, old in enumerate(kept)}
+            events = [(renumber[c], over) for c, over in events if c not in drop]
+            signs = [signs[c] for c in kept]
+    return GaussCode(tuple(events), tuple(signs))
+
+
+def _walking_order(code: GaussCode) -> GaussCode:
+    """The same diagram with crossings numbered in order of first passage (keeps the bracket small)."""
+    renumber: dict[int, int] = {}
+    for c, _ in code.events:
+        renumber.setdefault(c, len(renumber))
+    signs = [0] * len(code.signs)
+    for old, new in renumber.items():
+        signs[new] = code.signs[old]
+    return GaussCode(tuple((renumber[c], over) for c, over in code.events), tuple(signs))
 
 
 def _closing_path(p: PData) -> list[tuple[int, str]]:
@@ -399,17 +447,30 @@ def _loop_poly(a: dict[int, int], b: dict[int, int]) -> dict[int, int]:
 _LOOP = {2: -1, -2: -1}  # d = -A^2 - A^-2, the value of a closed loop
 
 
+def _greedy_order(pd: Sequence[tuple[int, int, int, int]]) -> list[tuple[int, int, int, int]]:
+    """Crossings ordered so each one shares as many edges as possible with those before it."""
+    left = list(pd)
+    open_edges: set[int] = set()
+    order = []
+    while left:
+        best = max(range(len(left)), key=lambda i: (sum(e in open_edges for e in left[i]), -i))
+        x = left.pop(best)
+        order.append(x)
+        open_edges ^= {e for e in x if x.count(e) == 1}
+    return order
+
+
 def kauffman_bracket(pd: Sequence[tuple[int, int, int, int]]) -> dict[int, int]:
     """Kauffman bracket ``<K>`` in ``A`` (exponent -> coefficient), normalised so ``<O> = 1``.
 
     Crossings are smoothed one at a time (``<X[a,b,c,d]> = A <(ab)(cd)> + A^-1 <(ad)(bc)>``) while
-    a table maps each matching of the still open edge ends to its polynomial; processing the
-    crossings in walking order keeps that table small.
+    a table maps each matching of the still open edge ends to its polynomial. The table grows with
+    the number of open ends, so the next crossing is always the one that closes the most of them.
     """
     if not pd:
         return {0: 1}
     states: dict[tuple[tuple[int, int], ...], dict[int, int]] = {(): {0: 1}}
-    for a, b, c, dd in pd:
+    for a, b, c, dd in _greedy_order(pd):
         new_states: dict[tuple[tuple[int, int], ...], dict[int, int]] = {}
         for matching, poly in states.items():
             for weight, pairs in ((1, ((a, b), (c, dd))), (-1, ((a, dd), (b, c)))):
@@ -484,9 +545,10 @@ def jones_polynomial(code: GaussCode) -> tuple[tuple[int, int], ...]:
 
 def invariants(code: GaussCode) -> KnotType:
     """The invariants of a closed diagram, named from the catalogue (``"unknown"`` outside it)."""
-    alexander = alexander_polynomial(code)
+    reduced = _walking_order(simplify(code))
+    alexander = alexander_polynomial(reduced)
     determinant = abs(sum(c * (-1) ** i for i, c in enumerate(alexander)))
-    jones = jones_polynomial(code)
+    jones = jones_polynomial(reduced)
     name = _BY_INVARIANTS.get((alexander, jones), UNKNOWN)
     return KnotType(name, alexander, determinant, jones, code.writhe)
 
