@@ -91,7 +91,10 @@ class Run(Base):
 
 
 class TopologicalState(Base):
-    """A distinct P-data state; ``key`` is ``PData.key`` (compact JSON), ``cross`` its crossing count."""
+    """A distinct P-data state; ``key`` is ``PData.key`` (compact JSON), ``cross`` its crossing count.
+
+    ``knot_type`` (revision 0006) names the knot the state ties (:func:`twisted.knots.identify`).
+    """
 
     __tablename__ = "topological_states"
 
@@ -99,6 +102,8 @@ class TopologicalState(Base):
     key: Mapped[str] = mapped_column(Text, unique=True)
     p_data: Mapped[list[Any]] = mapped_column(JSON)
     cross: Mapped[int] = mapped_column(Integer, index=True)
+    # twisted.knots.identify(p_data).name: the knot the rope ties when closed under everything (0006)
+    knot_type: Mapped[str | None] = mapped_column(String(16), index=True)
 
 
 class Configuration(Base):

@@ -18,6 +18,7 @@ from sqlalchemy import func, select, text, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
+from twisted.knots import identify
 from twisted.store.models import (
     CollectBatch,
     CollectTry,
@@ -28,7 +29,7 @@ from twisted.store.models import (
     array_to_blob,
     utcnow,
 )
-from twisted.topology import PData
+from twisted.topology import PData, PDataError
 
 
 def _insert(session: Session, model: type) -> Any:
@@ -113,6 +114,14 @@ def mark_stale_runs(session: Session, kind: str) -> list[int]:
 # --- states and configurations ---------------------------------------------------------------------------
 
 
+def _knot_type(p_data: PData) -> str | None:
+    """The knot ``p_data`` ties (None for P-data that cannot be drawn in the plane)."""
+    try:
+        return identify(p_data).name
+    except PDataError:
+        return None
+
+
 def get_or_create_state(session: Session, p_data: PData) -> TopologicalState:
     """The ``topological_states`` row of ``p_data``, inserted if new (safe against concurrent writers)."""
     state = session.scalar(select(TopologicalState).where(TopologicalState.key == p_data.key))
@@ -120,7 +129,7 @@ def get_or_create_state(session: Session, p_data: PData) -> TopologicalState:
         return state
     session.execute(
         _insert(session, TopologicalState)
-        .values(key=p_data.key, p_data=p_data.to_list(), cross=p_data.cross)
+        .values(key=p_data.key, p_data=p_data.to_list(), cross=p_data.cross, knot_type=_knot_type(p_data))
         .on_conflict_do_nothing(index_elements=["key"])
     )
     return session.scalars(select(TopologicalState).where(TopologicalState.key == p_data.key)).one()
