@@ -167,7 +167,8 @@ def stats_command(
     ctx: typer.Context,
     as_json: bool = typer.Option(False, "--json", help="Print the figures as JSON."),
 ) -> None:
-    """Configurations, kept transitions and states per crossing count; acceptance; throughput per run.
+    """Configurations, kept transitions and states per crossing count and per knot type; acceptance;
+    throughput per run.
 
     Read-only: safe to run while a collector is writing.
     """
@@ -178,8 +179,20 @@ def stats_command(
         store = open_store(db_url(ctx), create=False)
     except StoreError as exc:
         fail(str(exc), EXIT_BAD_INPUT)
+    from twisted.store.knots import knot_visits
+
     with store:
         stats = collection_stats(store)
+        with store.session() as session:
+            stats["by_knot"] = [
+                {
+                    "knot_type": v.knot_type,
+                    "states": v.states,
+                    "visited_states": v.visited_states,
+                    "configurations": v.configurations,
+                }
+                for v in knot_visits(session)
+            ]
     if as_json:
         typer.echo(json.dumps(stats, default=str, indent=2))
         return
@@ -194,6 +207,18 @@ def stats_command(
             _num(row["configurations"]),
             _num(row["transitions_in"]),
             _num(row["transitions_out"]),
+        )
+    console.print(table)
+
+    table = Table(title="Per knot type (rope closed under the table)")
+    for name in ("knot", "states", "visited states", "configurations"):
+        table.add_column(name, justify="right")
+    for row in stats["by_knot"]:
+        table.add_row(
+            row["knot_type"] or "-",
+            _num(row["states"]),
+            _num(row["visited_states"]),
+            _num(row["configurations"]),
         )
     console.print(table)
 
