@@ -1,0 +1,85 @@
+"""Catalogue counts: how many enumerated states of each crossing count tie each named knot, how long
+identify() takes per state, and (with --db) how often the data visited them.
+
+    python bench/bench_knots.py [--max-crossings 4] [--db sqlite:////tmp/copy.db]
+
+--db opens (and so migrates) the database: point it at a copy, not at data you must keep unchanged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections import Counter
+
+from twisted.knots import identify, identify_points
+from twisted.moves import enumerate_states
+from twisted.topology import parse_p_data
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--max-crossings", type=int, default=4, help="enumerate up to this count (5: ~1 min)")
+    parser.add_argument("--db", help="database URL (a copy: opening migrates it)")
+    args = parser.parse_args()
+
+    t0 = time.perf_counter()
+    states = enumerate_states(args.max_crossings)
+    print(f"enumeration to {args.max_crossings} crossings: {time.perf_counter() - t0:.1f} s")
+    names = ["0_1", "3_1+", "3_1-", "4_1", "5_1+", "5_1-", "5_2+", "5_2-", "unknown"]
+    by_state: dict[str, str] = {}
+    print(f"{'cross':>5} {'states':>7} " + " ".join(f"{n:>7}" for n in names) + "  us/identify")
+    for c in range(args.max_crossings + 1):
+        identify.cache_clear()
+        t0 = time.perf_counter()
+        types = [identify(p).name for p in states[c]]
+        per_state_us = 1e6 * (time.perf_counter() - t0) / max(len(types), 1)
+        by_state.update({p.key: t for p, t in zip(states[c], types, strict=True)})
+        counts = Counter(types)
+        row = " ".join(f"{counts.get(n, 0):>7}" for n in names)
+        print(f"{c:>5} {len(types):>7} {row}  {per_state_us:8.0f}")
+
+    if not args.db:
+        return
+    from sqlalchemy import select
+
+    from twisted.store import Configuration, TopologicalState, blob_to_array, open_store
+
+    with open_store(args.db) as store, store.session() as session:
+        rows = session.execute(
+            select(
+                TopologicalState.key, TopologicalState.cross, TopologicalState.knot_type, Configuration.points
+            ).join(Configuration, Configuration.state_id == TopologicalState.id)
+        ).all()
+    print(f"\ndatabase: {len(rows)} configurations")
+    visited: dict[tuple[int, str], set[str]] = {}
+    configs: Counter[tuple[int, str]] = Counter()
+    agree = 0
+    t0 = time.perf_counter()
+    for key, cross, knot_type, points in rows:
+        configs[(cross, knot_type)] += 1
+        visited.setdefault((cross, knot_type), set()).add(key)
+        agree += identify(parse_p_data(key)) == identify_points(blob_to_array(points, (-1, 3)))
+    point_us = 1e6 * (time.perf_counter() - t0) / max(len(rows), 1)
+    print(
+        f"P-data route == link-point route on {agree} of {len(rows)} configurations ({point_us:.0f} us each)"
+    )
+    print(f"{'cross':>5} {'knot':>8} {'visited states':>15} {'of enumerated':>14} {'configurations':>15}")
+    for (cross, knot_type), n in sorted(configs.items(), key=lambda kv: (kv[0][0], str(kv[0][1]))):
+        if knot_type == "0_1":
+            continue
+        enumerated = (
+            sum(1 for k, t in by_state.items() if t == knot_type and parse_p_data(k).cross == cross)
+            if cross <= args.max_crossings
+            else None
+        )
+        of = "-" if enumerated is None else str(enumerated)
+        print(f"{cross:>5} {knot_type:>8} {len(visited[(cross, knot_type)]):>15} {of:>14} {n:>15}")
+    totals: Counter[str] = Counter()
+    for (_, knot_type), n in configs.items():
+        totals[str(knot_type)] += n
+    print("configurations per knot type:", dict(totals.most_common()))
+
+
+if __name__ == "__main__":
+    main()
