@@ -52,8 +52,8 @@ def main() -> None:
             ).join(Configuration, Configuration.state_id == TopologicalState.id)
         ).all()
     print(f"\ndatabase: {len(rows)} configurations")
-    visited: dict[tuple[int, str], set[str]] = {}
-    configs: Counter[tuple[int, str]] = Counter()
+    visited: dict[tuple[int, str | None], set[str]] = {}
+    configs: Counter[tuple[int, str | None]] = Counter()
     agree = 0
     t0 = time.perf_counter()
     for key, cross, knot_type, points in rows:
