@@ -17,6 +17,7 @@ from twisted.moves import enumerate_states
 from twisted.planner import PlanInputError, high_level, make_goal, replay
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, load_problem_set
+from twisted.store.knots import knots_tied
 from twisted.store.search import SearchRunRow, find_resumable_run, load_run
 from twisted.topology import EMPTY, parse_p_data
 
@@ -112,6 +113,9 @@ def test_plan_to_an_overhand_knot_solves_replays_and_is_stored(tmp_path: Path) -
         with store.session() as session:
             row = session.scalar(select(SearchRunRow).where(SearchRunRow.run_id == result["run_id"]))
             assert row is not None and row.goal_knot == "overhand" and row.goal_cross == 3
+            # the planner's tree counts in "which knots have we tied" (nodes of T, by run)
+            tied = {(t.knot_type, t.run_kind) for t in knots_tied(session) if t.run_id == result["run_id"]}
+            assert (identify(reached).name, "plan") in tied
     code, out = _cli(db, "replay", str(result["run_id"]))
     assert code == 0 and "reaches the goal overhand" in out
 

@@ -1,7 +1,7 @@
 """Knot questions over the foundation tables (``topological_states.knot_type``, revision 0006).
 
-The same answers are in the views ``knot_visits`` and ``knots_tied`` for a sqlite3/psql shell; these
-functions use the ORM so they work before the views exist in a test's hand-made schema as well.
+The same answers are in the views ``knot_visits`` and ``knots_tied`` for a sqlite3/psql shell;
+:func:`knots_tied` reads its view (it spans two areas' tables: configurations and planner trees).
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import datetime as dt
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from sqlalchemy import func, select
+from sqlalchemy import DateTime, Integer, String, column, func, select, table
 from sqlalchemy.orm import Session
 
-from twisted.store.models import Configuration, Run, TopologicalState
+from twisted.store.models import Configuration, TopologicalState
 
 __all__ = [
     "KNOT_VIEW_NAMES",
@@ -67,24 +67,25 @@ def knot_visits(session: Session) -> list[KnotVisits]:
     return sorted(out, key=lambda v: (-v.configurations, v.knot_type or ""))
 
 
+# The view of migration 0009: collected configurations and planner tree nodes, per knot type and run.
+_KNOTS_TIED = table(
+    "knots_tied",
+    column("knot_type", String),
+    column("run_id", Integer),
+    column("run_kind", String),
+    column("configurations", Integer),
+    column("states", Integer),
+    column("first_seen", DateTime(timezone=True)),
+)
+
+
 def knots_tied(session: Session) -> list[KnotTied]:
-    """Per knot type other than the unknot, per run (the view ``knots_tied``)."""
-    s, c = TopologicalState, Configuration
+    """Per knot type other than the unknot, per run (collect: configurations; plan: nodes of ``T``)."""
+    v = _KNOTS_TIED.c
     rows = session.execute(
-        select(
-            s.knot_type,
-            c.run_id,
-            Run.kind,
-            func.count(c.id),
-            func.count(func.distinct(s.id)),
-            func.min(c.created_at),
+        select(v.knot_type, v.run_id, v.run_kind, v.configurations, v.states, v.first_seen).order_by(
+            v.knot_type, v.run_id, v.run_kind
         )
-        .select_from(c)
-        .join(s, s.id == c.state_id)
-        .outerjoin(Run, Run.id == c.run_id)
-        .where(s.knot_type.is_not(None), s.knot_type != "0_1")
-        .group_by(s.knot_type, c.run_id, Run.kind)
-        .order_by(s.knot_type, c.run_id)
     ).all()
     return [KnotTied(str(k), r, kind, int(n), int(m), first) for k, r, kind, n, m, first in rows]
 
