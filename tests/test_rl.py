@@ -15,7 +15,7 @@ from twisted.planner import Node  # noqa: E402
 from twisted.rl import PolicyError, SacConfig, load_policy_sampler, train_sac  # noqa: E402
 from twisted.sim import CURVE_HIGH, CURVE_LOW, RopeSim  # noqa: E402
 from twisted.store import open_store  # noqa: E402
-from twisted.store.rl import RlCheckpoint, RlRun, list_checkpoints, success_table  # noqa: E402
+from twisted.store.rl import RlCheckpoint, RlRun, RlSuccess, list_checkpoints, success_table  # noqa: E402
 from twisted.topology import parse_p_data  # noqa: E402
 
 ONE = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
@@ -62,6 +62,9 @@ def test_short_run_is_interrupted_resumed_and_its_policy_samples_valid_curves(sq
         assert [c.steps for c in checkpoints] == [180, 120]
         assert [c.has_replay_buffer for c in checkpoints] == [True, False]
 
+    # a process killed after its checkpoint had logged one more interval: the resume runs it again
+    with store.session(write=True) as session:
+        session.add(RlSuccess(rl_run_id=run.id, steps=200, goal_cross=1, episodes=9, successes=9))
     resumed: list[int] = []
     outcome = train_sac(store, resume_run_id=run.id, progress=lambda p: resumed.append(p.steps))
     assert outcome.status == "finished" and outcome.run_id == run.id

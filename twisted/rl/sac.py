@@ -21,11 +21,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 
 from twisted.store.db import Store
 from twisted.store.models import utcnow
-from twisted.store.rl import RlCheckpoint, RlRun, add_checkpoint, add_success
+from twisted.store.rl import RlCheckpoint, RlRun, RlSuccess, add_checkpoint, add_success
 
 __all__ = ["RlProgress", "SacConfig", "SacOutcome", "evaluate_policy", "make_env", "require_rl", "train_sac"]
 
@@ -233,6 +233,10 @@ def train_sac(
                 )
             else:
                 run.steps_done, run.episodes, run.elapsed_s = 0, 0, 0.0
+            # ... and so do the success intervals a killed process logged after it (they are re-run)
+            session.execute(
+                delete(RlSuccess).where(RlSuccess.rl_run_id == run.id, RlSuccess.steps > run.steps_done)
+            )
             run.status, run.message, run.ended_at = "running", None, None
         else:
             assert config is not None
