@@ -13,11 +13,12 @@ from cli.main import app
 from twisted.evaluate import parse_goal_file
 from twisted.goals import Goal, GoalError, goal_from_spec, knot_goal, state_goal
 from twisted.knots import identify
-from twisted.moves import enumerate_states
+from twisted.moves import Plan, enumerate_states, plans, plans_to_any
 from twisted.planner import PlanInputError, high_level, make_goal, replay
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, load_problem_set
 from twisted.store.knots import knots_tied
+from twisted.store.plans import PlanQuery
 from twisted.store.search import SearchRunRow, find_resumable_run, load_run
 from twisted.topology import EMPTY, parse_p_data
 
@@ -73,16 +74,35 @@ def test_specs_round_trip_and_name_the_bad_part() -> None:
         make_goal(ONE_CROSSING, crossings=3)
 
 
-def test_high_level_plans_lead_to_members_and_members_take_turns(sqlite_url: str) -> None:
+def test_high_level_plans_lead_to_any_member_shortest_first_and_are_cached(sqlite_url: str) -> None:
     goal = knot_goal("overhand")
     with open_store(sqlite_url) as store:
         found = high_level(store, goal, 20)(EMPTY)
+        with store.session() as session:
+            stored = session.scalars(select(PlanQuery.goal_key).where(PlanQuery.start_key == EMPTY.key)).all()
+    assert stored == [goal.cache_key] and goal.cache_key.startswith("knot:overhand@3#48:")
     assert len(found) == 20
     assert all(plan.states[0] == EMPTY and plan.states[-1] in goal for plan in found)
     lengths = [len(plan.moves) for plan in found]
     assert lengths == sorted(lengths)
-    # not all from the first member: the shortest plans of many members come first
     assert len({plan.states[-1].key for plan in found}) > 5
+
+
+def test_plans_to_any_is_the_union_of_the_members_plans() -> None:
+    one = enumerate_states(1)[1][0]
+    for start in (EMPTY, one):
+        for name in ("overhand", "figure-eight"):
+            goal = knot_goal(name)
+            union = plans_to_any(start, goal.states, 10_000)
+            per_member = [p for g in goal.states for p in plans(start, g, 10_000)]
+            assert union and len(union) < 10_000
+            key = lambda plan: tuple(s.key for s in plan.states)  # noqa: E731
+            assert sorted(map(key, union)) == sorted(map(key, per_member))
+            assert [len(p.moves) for p in union] == sorted(len(p.moves) for p in union)
+    # one goal: exactly plans()
+    target = knot_goal("overhand").states[0]
+    assert plans_to_any(EMPTY, [target], 50) == plans(EMPTY, target, 50)
+    assert plans_to_any(target, knot_goal("overhand").states) == [Plan([target], [])]
 
 
 def test_goal_files_take_knot_names() -> None:

@@ -11,6 +11,7 @@ the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@
 
 from __future__ import annotations
 
+import hashlib
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -69,6 +70,15 @@ class Goal:
         if self.knot is not None:
             return f"{KNOT_PREFIX}{self.knot}@{self.crossings}"
         return self.states[0].key
+
+    @property
+    def cache_key(self) -> str:
+        """The plan cache's goal key: the P-data key for one state; for a set its spec and a digest of its
+        member keys (so that a changed catalogue or enumeration never reads another set's plans)."""
+        if len(self.states) == 1 and self.knot is None:
+            return self.states[0].key
+        digest = hashlib.sha1("\n".join(p.key for p in self.states).encode()).hexdigest()[:16]
+        return f"{self.spec}#{len(self.states)}:{digest}"
 
     @property
     def label(self) -> str:

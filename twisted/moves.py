@@ -51,7 +51,7 @@ planar P-data: 4, 40, 528 and 7,968 states with 1, 2, 3 and 4 crossings, the ref
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, Literal
@@ -69,6 +69,7 @@ __all__ = [
     "explains",
     "parse_state",
     "plans",
+    "plans_to_any",
     "successors",
     "sub_states",
 ]
@@ -378,23 +379,35 @@ def plans(start: PData, goal: PData, limit: int = DEFAULT_PLAN_LIMIT) -> list[Pl
     their state sequences; where several moves make the same step, the plan names the first (all
     of them are in :func:`successors`). An unreachable goal gives ``[]``.
     """
+    return plans_to_any(start, [goal], limit)
+
+
+def plans_to_any(start: PData, goals: Iterable[PData], limit: int = DEFAULT_PLAN_LIMIT) -> list[Plan]:
+    """Move sequences from ``start`` to any of ``goals`` (e.g. every state that ties a knot), shortest first.
+
+    One BFS over the union of the goals' sub-states; a plan stops at the first goal it reaches. With one
+    goal this is :func:`plans`.
+    """
     if limit < 1:
         raise ValueError(f"limit must be >= 1, got {limit}")
-    if start == goal:
+    targets = frozenset(goals)
+    if not targets:
+        raise ValueError("give at least one goal state")
+    if start in targets:
         return [Plan([start], [])]
-    if start.cross >= goal.cross:
-        return []
-    diagram(goal)  # a goal no rope can have is an input error, not "unreachable"
-    allowed = sub_states(goal)
+    for goal in sorted(targets, key=lambda p: p.key):
+        diagram(goal)  # a goal no rope can have is an input error, not "unreachable"
+    reachable = [goal for goal in targets if goal.cross > start.cross]
+    allowed = frozenset().union(*(sub_states(goal) for goal in reachable))
     if start not in allowed:
         return []
-    # forward: the part of the move graph between start and goal
+    # forward: the part of the move graph between start and the goals
     children: dict[PData, list[tuple[PData, Move]]] = {}
     frontier = [start]
     while frontier:
         next_frontier: list[PData] = []
         for u in frontier:
-            if u in children or u == goal:
+            if u in children or u in targets:
                 continue
             edges: dict[PData, Move] = {}
             for s in _successors(u):
@@ -403,9 +416,9 @@ def plans(start: PData, goal: PData, limit: int = DEFAULT_PLAN_LIMIT) -> list[Pl
             children[u] = list(edges.items())
             next_frontier.extend(edges)
         frontier = next_frontier
-    # backward: for each state, the plan lengths it has to the goal (moves add 1 or 2 crossings,
+    # backward: for each state, the plan lengths it has to a goal (moves add 1 or 2 crossings,
     # so lengths vary); states in decreasing crossing count form a topological order
-    lengths: dict[PData, frozenset[int]] = {goal: frozenset({0})}
+    lengths: dict[PData, frozenset[int]] = {goal: frozenset({0}) for goal in reachable}
     for u in sorted(children, key=lambda q: -q.cross):
         acc: set[int] = set()
         for v, _ in children[u]:

@@ -751,20 +751,14 @@ def curve_sampler(
 def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
     """``s -> plans(s, goal)``, shortest first, through the store's plan cache.
 
-    For a goal of several states (a knot), the plans to each member are merged shortest first and the
-    first ``limit`` kept; among plans of one length the members take turns, so that no member crowds
-    out the others. Each member's plans are cached on their own.
+    For a goal of several states (a knot) the plans lead to any member (one BFS over all of them).
     """
     from twisted.store.plans import cached_plans
 
+    target: Goal | PData = goal.states[0] if len(goal.states) == 1 else goal
+
     def plans_from(start: PData) -> list[Any]:
-        ranked = [
-            (len(plan.moves), rank, member_index, plan)
-            for member_index, member in enumerate(goal.states)
-            for rank, plan in enumerate(cached_plans(store, start, member, limit))
-        ]
-        ranked.sort(key=lambda entry: entry[:3])
-        return [entry[3] for entry in ranked[:limit]]
+        return list(cached_plans(store, start, target, limit))
 
     return plans_from
 

@@ -36,7 +36,8 @@ from sqlalchemy import (
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
-from twisted.moves import MOVES_VERSION, Move, Plan, plans
+from twisted.goals import Goal
+from twisted.moves import MOVES_VERSION, Move, Plan, plans, plans_to_any
 from twisted.store.db import Store
 from twisted.store.models import Base, utcnow
 from twisted.topology import PData, parse_p_data
@@ -85,14 +86,18 @@ class PlanRow(Base):
         return Plan([parse_p_data(s) for s in self.states], [Move.from_dict(m) for m in self.moves])
 
 
-def get_plans(session: Session, start: PData, goal: PData, limit: int) -> list[Plan] | None:
+def _goal_key(goal: PData | Goal) -> str:
+    return goal.key if isinstance(goal, PData) else goal.cache_key
+
+
+def get_plans(session: Session, start: PData, goal: PData | Goal, limit: int) -> list[Plan] | None:
     """The cached answer to ``plans(start, goal, limit)``, or None when the cache cannot give it.
 
     A query stored with a limit of at least ``limit``, or one stored complete, answers any limit:
     the BFS order is deterministic, so the first ``limit`` plans of a larger answer are the answer.
     """
     query = session.scalars(
-        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal.key)
+        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == _goal_key(goal))
     ).one_or_none()
     if query is None or query.moves_version != MOVES_VERSION:
         return None
@@ -107,11 +112,17 @@ def get_plans(session: Session, start: PData, goal: PData, limit: int) -> list[P
 
 
 def put_plans(
-    session: Session, start: PData, goal: PData, limit: int, found: list[Plan], compute_s: float = 0.0
+    session: Session,
+    start: PData,
+    goal: PData | Goal,
+    limit: int,
+    found: list[Plan],
+    compute_s: float = 0.0,
 ) -> None:
     """Store the answer ``found = plans(start, goal, limit)``, replacing any older one (flushes)."""
+    goal_key = _goal_key(goal)
     old = session.scalars(
-        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal.key)
+        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal_key)
     ).one_or_none()
     if old is not None:
         session.execute(delete(PlanRow).where(PlanRow.query_id == old.id))
@@ -119,7 +130,7 @@ def put_plans(
         session.flush()
     query = PlanQuery(
         start_key=start.key,
-        goal_key=goal.key,
+        goal_key=goal_key,
         start_cross=start.cross,
         goal_cross=goal.cross,
         plan_limit=limit,
@@ -134,7 +145,7 @@ def put_plans(
         PlanRow(
             query_id=query.id,
             start_key=start.key,
-            goal_key=goal.key,
+            goal_key=goal_key,
             plan_index=i,
             length=plan.length,
             states=[s.to_list() for s in plan.states],
@@ -145,14 +156,19 @@ def put_plans(
     session.flush()
 
 
-def _compute(start: PData, goal: PData, limit: int) -> tuple[list[Plan], float]:
+def _compute(start: PData, goal: PData | Goal, limit: int) -> tuple[list[Plan], float]:
     t0 = time.perf_counter()
-    found = plans(start, goal, limit)
+    found = plans(start, goal, limit) if isinstance(goal, PData) else plans_to_any(start, goal.states, limit)
     return found, time.perf_counter() - t0
 
 
-def cached_plans(store_or_session: Store | Session, start: PData, goal: PData, limit: int) -> list[Plan]:
+def cached_plans(
+    store_or_session: Store | Session, start: PData, goal: PData | Goal, limit: int
+) -> list[Plan]:
     """``plans(start, goal, limit)`` through the database cache (shortest first; ``[]`` = unreachable).
+
+    ``goal`` may be a set of states (:class:`twisted.goals.Goal`, e.g. a knot): then the plans lead to
+    any member (:func:`twisted.moves.plans_to_any`), cached under :attr:`Goal.cache_key`.
 
     With a :class:`Store` the answer is read in one short transaction and, on a miss, computed outside
     any transaction and written in another (if a concurrent process stored it first, its rows are
