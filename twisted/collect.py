@@ -219,8 +219,8 @@ def ensure_root(store: Store, run_id: int, friction_scale: float = 1.0) -> int |
     p_data = sim.p_data()
     if p_data != EMPTY:
         raise CollectError(f"the straight rope should have no crossing, the simulator reads {p_data}")
-    with store.session(write=True) as session:
-        # under the write lock, so two collectors starting together add one root
+    with store.exclusive_session("twisted.collect.root") as session:
+        # one process at a time, so two collectors starting together add one root
         if count_configurations(session, RUN_KIND) > 0:
             return None
         return add_configuration(

@@ -13,6 +13,7 @@ transaction waits for its turn instead of failing with "database is locked".
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sqlite3
 from collections.abc import Iterator
@@ -70,6 +71,20 @@ class Store:
             except BaseException:
                 session.rollback()
                 raise
+
+    @contextmanager
+    def exclusive_session(self, name: str) -> Iterator[Session]:
+        """A write session that no other process holds at the same time for the same ``name``.
+
+        For a read-then-insert that must happen once (e.g. the root of D_Q when two collectors start
+        together). SQLite's write lock already serialises writers; PostgreSQL takes a transaction-level
+        advisory lock keyed by ``name``, released at commit or rollback.
+        """
+        with self.session(write=True) as session:
+            if self.dialect == "postgresql":
+                key = int.from_bytes(hashlib.sha1(name.encode()).digest()[:8], "big", signed=True)
+                session.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": key})
+            yield session
 
     def close(self) -> None:
         """Release every pooled connection."""
