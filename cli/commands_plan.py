@@ -85,7 +85,9 @@ def plan_command(
         "any rope state that ties it.",
     ),
     crossings: int | None = typer.Option(
-        None, "--crossings", help="With --knot: states of this many crossings (default: the fewest)."
+        None,
+        "--crossings",
+        help="With --knot: states of this many crossings (default: the knot's crossing number).",
     ),
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time limit in seconds (a resumed run's time counts)."

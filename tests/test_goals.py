@@ -197,3 +197,15 @@ def test_problem_sets_of_knots_feed_eval(tmp_path: Path) -> None:
         rows = list(session.scalars(select(EvalResult)))
         assert sorted(r.goal_key for r in rows) == ["knot:figure-eight@4", "knot:overhand@3"]
         assert all(r.status in ("solved", "timeout") and r.plan_run_id is not None for r in rows)
+
+
+def test_rope_env_takes_knot_goals_like_the_planner(tmp_path: Path) -> None:
+    pytest.importorskip("gymnasium", reason="the rl extra (gymnasium) is not installed")
+    from twisted.envs import goal_pool
+
+    assert goal_pool(knot="overhand") == list(knot_goal("overhand").states)
+    assert goal_pool(knot="overhand", knot_crossings=2) == list(knot_goal("overhand", 2).states)
+    db = f"sqlite:///{tmp_path / 'env.db'}"
+    assert _cli(db, "problems", "knots", "figure-eight", "--name", "k")[0] == 0
+    # a knot goal of a problem set stands for all its states
+    assert goal_pool(problem_set="k", db_url=db) == list(knot_goal("figure-eight").states)

@@ -279,8 +279,8 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
     """Goals from JSON: a list of goals (one set called ``name``) or an object of named lists.
 
     A goal is P-data, or a knot (``"overhand"``, ``"figure-eight@4"``: any state of that many crossings,
-    default the fewest, that ties it). For an object the sets are called by their keys, prefixed
-    ``name-`` when a name is given. Every goal is checked; the first bad one raises
+    default the knot's crossing number, that ties it). For an object the sets are called by their
+    keys, prefixed ``name-`` when a name is given. Every goal is checked; the first bad one raises
     :class:`EvalInputError` naming set and index.
     """
     from twisted.goals import GoalError, goal_from_spec

@@ -42,7 +42,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from twisted.goals import Goal, state_goal
+from twisted.goals import KNOT_PREFIX, Goal, GoalError, goal_from_spec, knot_goal, state_goal
 from twisted.topology import PData
 
 __all__ = [
@@ -689,10 +689,9 @@ def make_goal(
     """The goal of a search: one P-data state (``goal``, or a ``knot:<name>@<n>`` spec) or a knot by name.
 
     Exactly one of ``goal`` and ``knot`` is given; ``crossings`` picks the knot's states of that many
-    crossings (default: the fewest). Raises :class:`PlanInputError` saying which input is wrong.
+    crossings (default: the knot's crossing number, see :func:`twisted.goals.knot_goal`). Raises
+    :class:`PlanInputError` saying which input is wrong.
     """
-    from twisted.goals import KNOT_PREFIX, GoalError, goal_from_spec, knot_goal
-
     if (goal is None) == (knot is None):
         raise PlanInputError("give exactly one goal: --goal P-DATA or --knot NAME")
     if crossings is not None and knot is None:

@@ -151,7 +151,8 @@ def goal_pool(
 
     ``goals``: P-data (JSON text, lists or PData); ``problem_set`` (with ``db_url``): the goals of a
     stored problem set (``twisted problems``); ``knot``: the states that tie a named knot
-    (``twisted.knots.states_tying``) with ``knot_crossings`` crossings (default: the fewest); none of
+    (:func:`twisted.goals.knot_goal`) with ``knot_crossings`` crossings (default: the knot's crossing
+    number, as for ``twisted plan --knot``); none of
     them: every state with a crossing count in ``goal_crossings`` (enumerated by the moves).
     """
     given = [name for name, v in (("goals", goals), ("problem_set", problem_set), ("knot", knot)) if v]
@@ -179,18 +180,19 @@ def goal_pool(
                 f"there is no problem set {problem_set!r} in {db_url} (sets: {', '.join(known) or 'none'}); "
                 "make one with `twisted problems`"
             )
-        return _check_goals([p.p_data for p in record.problems], f"problem set {problem_set!r} goal")
+        from twisted.goals import goal_from_spec
+
+        # a knot goal of the set stands for every state that ties the knot
+        states = [p for problem in record.problems for p in goal_from_spec(problem.goal_key).states]
+        return _check_goals(states, f"problem set {problem_set!r} goal")
     if knot is not None:
+        from twisted.goals import GoalError as KnotGoalError
+        from twisted.goals import knot_goal
+
         try:
-            from twisted.knots import states_tying
-        except ImportError:
-            raise GoalError(
-                f"knot {knot!r}: knot names need twisted.knots, which this installation lacks"
-            ) from None
-        try:
-            states = states_tying(knot, knot_crossings)
-        except ValueError as exc:
-            raise GoalError(str(exc)) from None
+            states = knot_goal(knot, knot_crossings).states
+        except KnotGoalError as exc:
+            raise GoalError(f"knot {knot!r}: {exc}") from None
         return _check_goals(states, f"knot {knot!r} state")
     from twisted.moves import enumerate_states
 
