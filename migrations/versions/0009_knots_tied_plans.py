@@ -18,17 +18,16 @@ down_revision = ("0006", "0008")
 branch_labels = None
 depends_on = None
 
-# Plain SQL valid on SQLite and PostgreSQL; both branches give the same column types.
-KNOTS_TIED = """
-    SELECT s.knot_type AS knot_type, c.run_id AS run_id, r.kind AS run_kind,
-           COUNT(c.id) AS configurations, COUNT(DISTINCT s.id) AS states,
-           MIN(c.created_at) AS first_seen
-    FROM configurations c
-    JOIN topological_states s ON s.id = c.state_id
-    LEFT JOIN runs r ON r.id = c.run_id
-    WHERE s.knot_type IS NOT NULL AND s.knot_type <> '0_1'
-    GROUP BY s.knot_type, c.run_id, r.kind
-  UNION ALL
+
+def _collected() -> str:
+    """0006's knots_tied: the collected configurations (this view adds the planner trees to it)."""
+    from importlib import import_module
+
+    return str(import_module("migrations.versions.0006_knots").KNOT_VIEWS["knots_tied"]).strip()
+
+
+# Plain SQL valid on SQLite and PostgreSQL; both parts give the same column types.
+PLANNER_TREES = """
     SELECT s.knot_type AS knot_type, n.run_id AS run_id, r.kind AS run_kind,
            COUNT(n.id) AS configurations, COUNT(DISTINCT s.id) AS states,
            MIN(r.started_at) AS first_seen
@@ -42,12 +41,9 @@ KNOTS_TIED = """
 
 def upgrade() -> None:
     op.execute("DROP VIEW IF EXISTS knots_tied")
-    op.execute(f"CREATE VIEW knots_tied AS {KNOTS_TIED.strip()}")
+    op.execute(f"CREATE VIEW knots_tied AS {_collected()}\n  UNION ALL\n{PLANNER_TREES.rstrip()}")
 
 
 def downgrade() -> None:
-    from importlib import import_module
-
-    previous = import_module("migrations.versions.0006_knots").KNOT_VIEWS["knots_tied"]
     op.execute("DROP VIEW IF EXISTS knots_tied")
-    op.execute(f"CREATE VIEW knots_tied AS {previous.strip()}")
+    op.execute(f"CREATE VIEW knots_tied AS {_collected()}")
