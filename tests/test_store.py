@@ -448,3 +448,35 @@ def test_two_stores_write_the_same_file_concurrently(sqlite_url: str) -> None:
     with open_store(sqlite_url) as store, store.session() as session:
         assert session.scalar(select(func.count(Configuration.id))) == 45
         assert session.scalar(select(func.count(TopologicalState.id))) == 3
+
+
+def test_open_retries_a_new_file_that_another_process_holds_locked(
+    sqlite_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Collectors started together on a new file: an open that meets "database is locked" is retried."""
+    from twisted.store import db
+
+    real = db._open_store
+    calls: list[int] = []
+
+    def flaky(parsed, **kwargs):  # noqa: ANN001, ANN003, ANN202 - db._open_store's signature
+        calls.append(1)
+        if len(calls) < 3:
+            raise db.StoreError(f"cannot create or upgrade database file {parsed}: database is locked")
+        return real(parsed, **kwargs)
+
+    monkeypatch.setattr(db, "_open_store", flaky)
+    monkeypatch.setattr(db.time, "sleep", lambda _s: None)
+    with db.open_store(sqlite_url) as store:
+        assert store.dialect == "sqlite"
+    assert len(calls) == 3
+
+    def refused(parsed, **kwargs):  # noqa: ANN001, ANN003, ANN202
+        calls.append(1)
+        raise db.StoreError("database file x is not an SQLite database")
+
+    calls.clear()
+    monkeypatch.setattr(db, "_open_store", refused)
+    with pytest.raises(db.StoreError, match="not an SQLite database"):
+        db.open_store(sqlite_url)
+    assert len(calls) == 1  # other errors are not retried

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import os
 import sqlite3
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -333,6 +334,24 @@ def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True) -> 
     not a twisted database, or its schema is newer.
     """
     parsed = parse_url(url)
+    # A new SQLite file that other processes create and migrate at the same moment (collectors started
+    # together) can answer "database is locked" at once, without waiting for the busy timeout (a journal
+    # mode change, a hot journal seen read-only): such an open is retried after a short pause.
+    for attempt in range(_OPEN_ATTEMPTS):
+        try:
+            return _open_store(parsed, create=create, upgrade=upgrade)
+        except StoreError as exc:
+            retry = sqlite_path(parsed) is not None and "database is locked" in str(exc)
+            if not retry or attempt == _OPEN_ATTEMPTS - 1:
+                raise
+            time.sleep(0.2 * (attempt + 1))
+    raise AssertionError("unreachable")
+
+
+_OPEN_ATTEMPTS = 5
+
+
+def _open_store(parsed: URL, *, create: bool, upgrade: bool) -> Store:
     where = f"database {_display(parsed)!r}"
     heads = head_revisions()
     path = sqlite_path(parsed)
