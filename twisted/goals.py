@@ -15,6 +15,7 @@ import hashlib
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from twisted.topology import PData
@@ -50,8 +51,9 @@ class Goal:
     def __contains__(self, p_data: object) -> bool:
         return isinstance(p_data, PData) and p_data.key in self.keys
 
-    @property
+    @cached_property
     def keys(self) -> frozenset[str]:
+        """The members' P-data keys (computed once: the planner tests every new node against them)."""
         return frozenset(p.key for p in self.states)
 
     @property
