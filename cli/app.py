@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -43,6 +43,16 @@ def db_url(ctx: typer.Context) -> str:
     """The database URL chosen by the global --db option (or TWISTED_DB)."""
     state = ctx.find_root().obj
     return state.db_url if isinstance(state, AppState) else DEFAULT_DB
+
+
+def open_db(ctx: typer.Context, create: bool = True) -> Any:
+    """The store at --db (created when new and ``create``); a refused database exits 2 with the reason."""
+    from twisted.store import StoreError, open_store
+
+    try:
+        return open_store(db_url(ctx), create=create)
+    except StoreError as exc:
+        fail(str(exc))
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:

@@ -10,7 +10,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, db_url, fail
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
 
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130  # the shell's convention for a run stopped by a signal
@@ -72,7 +72,6 @@ def collect_command(
     """
     from twisted.collect import CollectError, CollectOptions, CollectProgress, collect, default_workers
     from twisted.distributed import DistributedError, collect_on_ray, import_ray, resolve_address
-    from twisted.store import StoreError, open_store
 
     try:  # Ray problems first, before any database is created
         address = resolve_address(use_ray, ray_address)
@@ -96,10 +95,7 @@ def collect_command(
         options.validate()
     except CollectError as exc:
         fail(str(exc), EXIT_BAD_INPUT)
-    try:
-        store = open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc), EXIT_BAD_INPUT)
+    store = open_db(ctx)
 
     columns = (
         TextColumn("[bold]run {task.fields[run]}"),
@@ -173,12 +169,8 @@ def stats_command(
     Read-only: safe to run while a collector is writing.
     """
     from twisted.collect import collection_stats
-    from twisted.store import StoreError, open_store
 
-    try:
-        store = open_store(db_url(ctx), create=False)
-    except StoreError as exc:
-        fail(str(exc), EXIT_BAD_INPUT)
+    store = open_db(ctx, create=False)
     from twisted.store.knots import knot_visits
 
     with store:
@@ -263,14 +255,11 @@ def db_command(ctx: typer.Context) -> None:
     from sqlalchemy import func, inspect, select, text
 
     import twisted.store
-    from twisted.store import Base, StoreError, head_revisions, open_store
+    from twisted.store import Base, head_revisions
 
     for module in pkgutil.iter_modules(twisted.store.__path__):
         importlib.import_module(f"twisted.store.{module.name}")
-    try:
-        store = open_store(db_url(ctx), create=False)
-    except StoreError as exc:
-        fail(str(exc), EXIT_BAD_INPUT)
+    store = open_db(ctx, create=False)
     with store, store.session() as session:
         revisions = sorted(r[0] for r in session.execute(text("SELECT version_num FROM alembic_version")))
         present = set(inspect(session.connection()).get_table_names())

@@ -12,7 +12,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import app, console, db_url, err_console, fail
+from cli.app import app, console, db_url, err_console, fail, open_db
 
 problems_app = typer.Typer(
     no_args_is_help=True, help="Goal sets for evaluations (made from our data or imported)."
@@ -22,15 +22,6 @@ sensitivity_app = typer.Typer(
 )
 app.add_typer(problems_app, name="problems")
 app.add_typer(sensitivity_app, name="sensitivity")
-
-
-def _store(ctx: typer.Context) -> Any:
-    from twisted.store import StoreError, open_store
-
-    try:
-        return open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
 
 
 def _print_sets(records: list[Any]) -> None:
@@ -68,7 +59,7 @@ def problems_make(
     """Make easy/medium/hard (3-crossing states by visit frequency), unseen-3 and 4 from our data."""
     from twisted.evaluate import ALL_MADE_SETS, EvalInputError, make_problem_sets_in_store
 
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         try:
             records = make_problem_sets_in_store(
                 store, per_set=per_set, seed=seed, prefix=prefix, replace=replace, sets=sets or ALL_MADE_SETS
@@ -93,7 +84,7 @@ def problems_import(
         text = file.read_text()
     except OSError as exc:
         fail(f"cannot read goal file {str(file)!r}: {exc.strerror}")
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         try:
             records = import_problem_sets(store, text, name)
         except EvalInputError as exc:
@@ -122,7 +113,7 @@ def problems_knots(
             goals.append(goal_from_spec(knot))
         except GoalError as exc:
             fail(f"knot {i} ({knot!r}): {exc}")
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         try:
             records = save_goal_sets(store, {name: goals}, "knot")
         except EvalInputError as exc:
@@ -139,7 +130,7 @@ def problems_list(
     """The stored problem sets (and the goals of one with --show)."""
     from twisted.store.experiments import list_problem_sets, load_problem_set
 
-    with _store(ctx) as store, store.session() as session:
+    with open_db(ctx) as store, store.session() as session:
         sets = list_problem_sets(session)
         record = load_problem_set(session, show) if show else None
     if show and record is None:
@@ -195,7 +186,7 @@ def _eval(
         TextColumn("solved {task.fields[solved]}"),
         TimeElapsedColumn(),
     )
-    with _store(ctx) as store, Progress(*columns, console=console) as bar:
+    with open_db(ctx) as store, Progress(*columns, console=console) as bar:
         task_id = None
 
         def on_start(summary: Any, pending: int) -> None:
@@ -349,7 +340,7 @@ def report_command(
     """Success-vs-time curves (PNG, one per set) and a Markdown table from the stored results."""
     from twisted.evaluate import write_report
 
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         files = write_report(store, out, sets or None)
     console.print(f"wrote {files.markdown}")
     for p in files.plots + files.sensitivity:
@@ -401,7 +392,7 @@ def sensitivity_plot(
     """Friction plots (one line per scale) for every set/planner evaluated at several scales."""
     from twisted.evaluate import write_report
 
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         files = write_report(store, out, sets or None)
     if not files.sensitivity:
         fail(
@@ -429,7 +420,7 @@ def discretise_command(
 
     workers = workers or _default_parallel()
     columns = (TextColumn("[bold]re-simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with _store(ctx) as store, Progress(*columns, console=console) as bar:
+    with open_db(ctx) as store, Progress(*columns, console=console) as bar:
         task_id = bar.add_task("discretise", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -493,7 +484,7 @@ def render_command(
     ]
     if len(chosen) != 1:
         fail("give exactly one of --config ID, --run ID or --goal P-DATA")
-    with _store(ctx) as store:
+    with open_db(ctx) as store:
         try:
             if config is not None:
                 rendered = render_configuration(store, config, out or Path(f"config-{config}.png"), gl=gl)

@@ -16,16 +16,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, console, db_url, err_console, fail
-
-
-def _open(ctx: typer.Context) -> Any:
-    from twisted.store import StoreError, open_store
-
-    try:
-        return open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
+from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, console, err_console, fail, open_db
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
@@ -156,7 +147,7 @@ def plan_command(
             "a goal is required: --goal P-DATA (e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]') "
             "or --knot NAME (e.g. overhand)"
         )
-    store = _open(ctx)
+    store = open_db(ctx)
 
     run_id: int | None = None
     parameters: dict[str, Any] | None = None
@@ -313,7 +304,7 @@ def replay_command(
     """Re-simulate a run's plan from its initial configuration; exit 0 if it still ends in the goal."""
     from twisted.planner import PlanInputError, replay
 
-    store = _open(ctx)
+    store = open_db(ctx)
     try:
         result = replay(store, run_id)
     except PlanInputError as exc:

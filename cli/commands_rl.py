@@ -8,7 +8,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, db_url, fail
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
 
 rl_app = typer.Typer(
     no_args_is_help=True,
@@ -82,7 +82,6 @@ def train_command(
     except ImportError as exc:
         fail(str(exc))
     from twisted.envs import GoalError
-    from twisted.store import StoreError, open_store
 
     torch.set_num_threads(threads)
     config = SacConfig(
@@ -101,10 +100,7 @@ def train_command(
         checkpoint_every=checkpoint_every,
         keep_replay_buffer=replay_buffer,
     )
-    try:
-        store = open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
+    store = open_db(ctx)
     columns = (
         TextColumn("[bold]run {task.fields[run]}"),
         BarColumn(),
@@ -147,13 +143,9 @@ def list_command(ctx: typer.Context) -> None:
     """SAC runs with their success per goal crossing count, and their stored policies."""
     from sqlalchemy import select
 
-    from twisted.store import StoreError, open_store
     from twisted.store.rl import RlRun, list_checkpoints
 
-    try:
-        store = open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
+    store = open_db(ctx)
     with store.session() as session:
         runs = session.scalars(select(RlRun).order_by(RlRun.id)).all()
         checkpoints = list_checkpoints(session)

@@ -10,7 +10,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, db_url, fail
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
 
 
 def _fmt(value: Any, spec: str = ".3f") -> str:
@@ -58,7 +58,6 @@ def train_command(
     from twisted.model.network import NetConfig
     from twisted.model.train import Progress as TrainProgress
     from twisted.model.train import TrainConfig, train
-    from twisted.store import StoreError, open_store
 
     if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
         fail(f"--device must be cpu or cuda, got {device!r}")
@@ -82,10 +81,7 @@ def train_command(
             hidden=hidden, layers=layers, components=components, link_head=link_head, new_visits=new_visits
         ),
     )
-    try:
-        store = open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
+    store = open_db(ctx)
 
     columns = (
         TextColumn("[bold]epoch {task.fields[epoch]}/{task.total}"),
@@ -158,12 +154,8 @@ def models_command(
 ) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
     from twisted.model.registry import ModelError, default_model_path, list_models, load_model
-    from twisted.store import StoreError, open_store
 
-    try:
-        store = open_store(db_url(ctx))
-    except StoreError as exc:
-        fail(str(exc))
+    store = open_db(ctx)
     if export is not None:
         try:
             model = load_model(store, model_id)
