@@ -1,4 +1,5 @@
-"""Catalogue counts: how many enumerated states of each crossing count tie each named knot, how long
+"""Catalogue counts: how many enumerated states of each crossing count really tie each named knot (both
+closures agree) or are knotoids, the (under, over) classes, the smallest count per knot, how long
 identify() takes per state, and (with --db) how often the data visited them.
 
     python bench/bench_knots.py [--max-crossings 4] [--db sqlite:////tmp/copy.db]
@@ -12,9 +13,15 @@ import argparse
 import time
 from collections import Counter
 
-from twisted.knots import identify, identify_points
+from twisted.knots import CATALOGUE, RopeKnot, crossing_number, identify, identify_points
 from twisted.moves import enumerate_states
 from twisted.topology import parse_p_data
+
+
+def _class(k: RopeKnot) -> str:
+    if k.is_knot:
+        return f"both {k.name}"
+    return "knotoid " + "/".join(sorted((k.under.name, k.over.name)))
 
 
 def main() -> None:
@@ -26,18 +33,32 @@ def main() -> None:
     t0 = time.perf_counter()
     states = enumerate_states(args.max_crossings)
     print(f"enumeration to {args.max_crossings} crossings: {time.perf_counter() - t0:.1f} s")
-    names = ["0_1", "3_1+", "3_1-", "4_1", "5_1+", "5_1-", "5_2+", "5_2-", "unknown"]
+    names = ["0_1", "3_1+", "3_1-", "4_1", "5_1+", "5_1-", "5_2+", "5_2-", "knotoid", "unknown"]
     by_state: dict[str, str] = {}
+    print("knot type per state: the knot when both closures (under and over the table) agree, else knotoid")
     print(f"{'cross':>5} {'states':>7} " + " ".join(f"{n:>7}" for n in names) + "  us/identify")
+    classes: dict[int, Counter[str]] = {}
     for c in range(args.max_crossings + 1):
         identify.cache_clear()
         t0 = time.perf_counter()
-        types = [identify(p).name for p in states[c]]
-        per_state_us = 1e6 * (time.perf_counter() - t0) / max(len(types), 1)
+        knots = [identify(p) for p in states[c]]
+        per_state_us = 1e6 * (time.perf_counter() - t0) / max(len(knots), 1)
+        types = [k.name for k in knots]
         by_state.update({p.key: t for p, t in zip(states[c], types, strict=True)})
         counts = Counter(types)
         row = " ".join(f"{counts.get(n, 0):>7}" for n in names)
         print(f"{c:>5} {len(types):>7} {row}  {per_state_us:8.0f}")
+        classes[c] = Counter(_class(k) for k in knots)
+    print("\n(under, over) classes per crossing count (a pair in either order; 'both X': a knot)")
+    for c, counter in classes.items():
+        print(f"{c:>5}: " + ", ".join(f"{name} {n:,}" for name, n in counter.most_common()))
+    print("\nsmallest crossing count at which a state ties each catalogue knot (both closures):")
+    for t in CATALOGUE:
+        counts_with = [
+            c for c in range(args.max_crossings + 1) if any(by_state[p.key] == t for p in states[c])
+        ]
+        least = counts_with[0] if counts_with else None
+        print(f"  {t:<10} crossing number {crossing_number(t)}: " + ("-" if least is None else str(least)))
 
     if not args.db:
         return

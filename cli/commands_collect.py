@@ -202,7 +202,7 @@ def stats_command(
         )
     console.print(table)
 
-    table = Table(title="Per knot type (rope closed under the table)")
+    table = Table(title="Per knot type (both closures agree; knotoid: they differ, no knot)")
     for name in ("knot", "states", "visited states", "configurations"):
         table.add_column(name, justify="right")
     for row in stats["by_knot"]:

@@ -474,9 +474,15 @@ def render_command(
     gl: bool = typer.Option(
         True, "--gl/--no-gl", help="Use MuJoCo's offscreen OpenGL (EGL/OSMesa) if it works."
     ),
+    tightened: bool = typer.Option(
+        False,
+        "--tightened",
+        help="With --run: the plan's final rope beside the same rope pulled tight (runs the pull test of "
+        "`twisted replay --tighten` first when none is stored).",
+    ),
 ) -> None:
     """Draw a configuration, a run's plan or a goal state (look before you read)."""
-    from twisted.render import RenderError, render_configuration, render_goal, render_run
+    from twisted.render import RenderError, render_configuration, render_goal, render_run, render_tightened
     from twisted.topology import PDataError
 
     chosen = [
@@ -484,10 +490,24 @@ def render_command(
     ]
     if len(chosen) != 1:
         fail("give exactly one of --config ID, --run ID or --goal P-DATA")
+    if tightened and run is None:
+        fail("--tightened draws a run: give --run ID")
     with open_db(ctx) as store:
         try:
             if config is not None:
                 rendered = render_configuration(store, config, out or Path(f"config-{config}.png"), gl=gl)
+            elif run is not None and tightened:
+                from twisted.planner import PlanInputError, replay
+                from twisted.store.knots import tightenings
+
+                with store.session() as session:
+                    stored = any(t.ok for t in tightenings(session, run))
+                if not stored:
+                    try:
+                        replay(store, run, tighten=True)
+                    except PlanInputError as exc:
+                        fail(str(exc))
+                rendered = render_tightened(store, run, out or Path(f"run-{run}-tightened.png"))
             elif run is not None:
                 png = out or Path(f"run-{run}.png")
                 rendered = render_run(store, run, png, gif or png.with_suffix(".gif"), gl=gl)

@@ -12,7 +12,8 @@ from cli.app import EXIT_BAD_INPUT, app, console, db_url, err_console, fail
 
 knots_app = typer.Typer(
     no_args_is_help=True,
-    help="Knots by name: which knot a rope state ties (its ends joined under the table).",
+    help="Knots by name: which knot a rope state really ties (both closures, under and over the table, "
+    "agree; otherwise it is a knotoid).",
 )
 app.add_typer(knots_app, name="knots")
 
@@ -26,6 +27,9 @@ LIST_NAMES = (
     ("5_1-", "5_1-"),
     ("5_2+", "5_2+"),
     ("5_2-", "5_2-"),
+    ("granny+", "3_1+#3_1+"),
+    ("granny-", "3_1-#3_1-"),
+    ("square", "3_1+#3_1-"),
 )
 
 
@@ -47,40 +51,54 @@ def _visits(ctx: typer.Context, keys: list[str]) -> dict[str, int] | None:
 def list_command(
     ctx: typer.Context,
     crossings: int | None = typer.Option(
-        None, "--crossings", help="List the states of this many crossings (default: the smallest count)."
+        None,
+        "--crossings",
+        help="List the states of this many crossings (default: each knot's crossing number, the least "
+        "count at which a rope ties it).",
     ),
     max_crossings: int = typer.Option(
-        4, "--max-crossings", help="Search the smallest count up to this many crossings (5 takes ~1 min)."
+        4,
+        "--max-crossings",
+        help="Enumerate states up to this many crossings (5 takes ~1 min); granny and square are built "
+        "at 6 from their summands without enumerating.",
     ),
     limit: int = typer.Option(10, "--limit", help="States shown per knot, most visited first (0: all)."),
     as_json: bool = typer.Option(False, "--json", help="Print everything (all states) as JSON."),
 ) -> None:
-    """For each named knot: its invariants, and the P-data states of the smallest crossing count that tie
-    it, with how often the data in --db visited each (configurations reached in that state)."""
+    """For each named knot: its invariants, and the P-data states that really tie it (both closures are the
+    knot) at its crossing number, with how often the data in --db visited each (configurations reached
+    in that state)."""
     from rich.progress import Progress
 
-    from twisted.knots import CATALOGUE, states_tying
+    from twisted.knots import CATALOGUE, MAX_BUILT_CROSSINGS, crossing_number, states_tying
 
-    # 5 crossings enumerate 130,304 states (~30 s); 6 would take many minutes and gigabytes
-    if crossings is not None and not 0 <= crossings <= 5:
-        fail(f"--crossings must be between 0 and 5, got {crossings}")
+    # 5 crossings enumerate 130,304 states (~1 min); 6 would take many minutes and gigabytes
+    if crossings is not None and not 0 <= crossings <= MAX_BUILT_CROSSINGS:
+        fail(f"--crossings must be between 0 and {MAX_BUILT_CROSSINGS}, got {crossings}")
     if not 0 <= max_crossings <= 5:
         fail(f"--max-crossings must be between 0 and 5, got {max_crossings}")
     if limit < 0:
         fail(f"--limit must be >= 0, got {limit}")
 
-    found: dict[str, list[Any]] = {}
+    found: dict[str, list[Any] | None] = {}  # None: not enumerated at that count (see --max-crossings)
+    counts: dict[str, int] = {}
     with Progress(console=err_console, transient=True) as progress:
         task = progress.add_task("enumerating states", total=len(LIST_NAMES))
         for _name, canonical in LIST_NAMES:
-            found[canonical] = states_tying(canonical, crossings, max_crossings=max_crossings)
+            count = crossings if crossings is not None else crossing_number(canonical)
+            counts[canonical] = count
+            try:
+                found[canonical] = states_tying(canonical, count, max_crossings=max_crossings)
+            except ValueError:
+                found[canonical] = None
             progress.advance(task)
-    visits = _visits(ctx, [p.key for states in found.values() for p in states])
+    visits = _visits(ctx, [p.key for states in found.values() for p in states or ()])
 
     entries: list[dict[str, Any]] = []
     for name, canonical in LIST_NAMES:
         k = CATALOGUE[canonical]
-        states = sorted(found[canonical], key=lambda p: (-(visits or {}).get(p.key, 0), p.key))
+        listed = found[canonical]
+        states = sorted(listed or [], key=lambda p: (-(visits or {}).get(p.key, 0), p.key))
         entries.append(
             {
                 "name": name,
@@ -88,7 +106,9 @@ def list_command(
                 "alexander": k.alexander_text(),
                 "determinant": k.determinant,
                 "jones": k.jones_text(),
-                "crossings": states[0].cross if states else None,
+                "crossing_number": crossing_number(canonical),
+                "crossings": counts[canonical],
+                "enumerated": listed is not None,
                 "states": [
                     {"p_data": p.to_list(), "configurations": None if visits is None else visits[p.key]}
                     for p in states
@@ -101,7 +121,9 @@ def list_command(
         typer.echo(json.dumps(entries, indent=2))
         return
 
-    summary = Table(title="Named knots (rope closed under the table)")
+    summary = Table(
+        title="Named knots: states whose closures under AND over the table are the knot (knotoids excluded)"
+    )
     for column in ("name", "type", "Alexander", "det", "Jones", "crossings", "states", "visited", "configs"):
         summary.add_column(column, justify="right" if column in ("det", "crossings", "states") else "left")
     for e in entries:
@@ -111,8 +133,8 @@ def list_command(
             e["alexander"],
             str(e["determinant"]),
             e["jones"],
-            "-" if e["crossings"] is None else str(e["crossings"]),
-            str(len(e["states"])),
+            str(e["crossings"]),
+            str(len(e["states"])) if e["enumerated"] else f"? (--max-crossings {e['crossings']})",
             "-" if e["visited_states"] is None else str(e["visited_states"]),
             "-" if e["configurations"] is None else str(e["configurations"]),
         )
@@ -138,9 +160,10 @@ def list_command(
 @knots_app.command("identify")
 def identify_command(
     p_data: str = typer.Argument(..., help='A P-data state, e.g. \'[[1,"O",4,"+"],[2,"U",5,"+"],...]\'.'),
-    as_json: bool = typer.Option(False, "--json", help="Print the knot type as JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print both closures and the knot as JSON."),
 ) -> None:
-    """Which knot a rope state ties when its ends are joined under the table."""
+    """Which knot a rope state ties: both closures (ends joined under / over the table); a knot only when
+    they agree, otherwise a knotoid (pulling the ends decides)."""
     from twisted.knots import identify
     from twisted.topology import PDataError, parse_p_data
 
@@ -149,19 +172,12 @@ def identify_command(
     except PDataError as exc:
         fail(f"P_DATA: {exc}", EXIT_BAD_INPUT)
     if as_json:
-        typer.echo(
-            json.dumps(
-                {
-                    "knot_type": k.name,
-                    "alexander": list(k.alexander),
-                    "determinant": k.determinant,
-                    "jones": [list(t) for t in k.jones],
-                    "writhe": k.writhe,
-                }
-            )
-        )
+        typer.echo(json.dumps(k.to_dict()))
         return
-    console.print(
-        f"{k.name}  Alexander {k.alexander_text()}  det {k.determinant}  Jones {k.jones_text()}",
-        highlight=False,
-    )
+    console.print(k.describe(), highlight=False)
+    for label, c in (("under", k.under), ("over", k.over)):
+        console.print(
+            f"  closed {label:<5} {c.name:<10} Alexander {c.alexander_text()}  det {c.determinant}  "
+            f"Jones {c.jones_text()}",
+            highlight=False,
+        )

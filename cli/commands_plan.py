@@ -32,6 +32,7 @@ def _options(
     p_expand: float | None,
     k_expand: int | None,
     plan_limit: int | None,
+    tighten: bool | None = None,
     base: dict[str, Any] | None = None,
 ) -> Any:
     """PlannerOptions from the command line, over the stored ones of a resumed run (which must agree)."""
@@ -45,6 +46,7 @@ def _options(
         "p_expand": p_expand,
         "k_expand": k_expand,
         "plan_limit": plan_limit,
+        "tighten": tighten,
     }
     given = {name: value for name, value in given.items() if value is not None}
     if base is not None:
@@ -72,13 +74,14 @@ def plan_command(
     knot: str | None = typer.Option(
         None,
         "--knot",
-        help="Goal by knot name (overhand, figure-eight, 5_1, 5_2; see `twisted knots list`): "
-        "any rope state that ties it.",
+        help="Goal by knot name (overhand, figure-eight, 5_1, 5_2, granny, square; see `twisted knots "
+        "list`): any rope state that really ties it (both closures are the knot; knotoids never are).",
     ),
     crossings: int | None = typer.Option(
         None,
         "--crossings",
-        help="With --knot: states of this many crossings (default: the knot's crossing number).",
+        help="With --knot: states of this many crossings (default: the knot's crossing number, "
+        "3 overhand, 4 figure-eight, 5 for 5_1/5_2, 6 granny/square).",
     ),
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time limit in seconds (a resumed run's time counts)."
@@ -121,6 +124,13 @@ def plan_command(
     ),
     checkpoint_every_s: float = typer.Option(
         2.0, "--checkpoint-every", min=0.0, help="Seconds between checkpoints."
+    ),
+    tighten: bool = typer.Option(
+        False,
+        "--tighten",
+        help="Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a "
+        "little, pulled apart) ties the goal's knot; a reached state that fails the pull test does not "
+        "end the search. Each pull test is stored with the run.",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
@@ -177,6 +187,7 @@ def plan_command(
         p_expand=p_expand,
         k_expand=k_expand,
         plan_limit=plan_limit,
+        tighten=True if tighten else None,
         base=parameters,
     )
     try:
@@ -267,6 +278,8 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
             "nodes": result.nodes,
             "states": result.states,
             "plan": steps,
+            "tighten": search.options.tighten,
+            "pull_tests": search.pull_tests,
         }
         typer.echo(json.dumps(payload))
         return
@@ -276,7 +289,8 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
         f"  goal {search.goal.label}"
         + (f" reached {result.path[-1].p_data.key}" if result.path and search.goal.knot else "")
         + f"  search time {result.elapsed_s:.1f} s  simulator calls {result.sim_calls}"
-        f"  iterations {result.iterations}  nodes {result.nodes}  states {result.states}",
+        f"  iterations {result.iterations}  nodes {result.nodes}  states {result.states}"
+        + (f"  pull tests {search.pull_tests}" if search.options.tighten else ""),
         highlight=False,
     )
     if steps:
@@ -295,10 +309,31 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
         console.print(table)
 
 
+def _tightened_dict(t: Any) -> dict[str, Any] | None:
+    if t is None:
+        return None
+    return {
+        "ok": t.ok,
+        "reason": t.reason,
+        "p_data": None if t.p_data is None else t.p_data.to_list(),
+        "knot": None if t.knot is None else t.knot.to_dict(),
+        "knot_type": t.knot_name,
+        "end_distance_m": t.end_distance_m,
+        "sim_seconds": t.sim_seconds,
+        "wall_seconds": t.wall_seconds,
+    }
+
+
 @app.command("replay")
 def replay_command(
     ctx: typer.Context,
     run_id: int = typer.Argument(..., help="A solved planner run (see `twisted plan`)."),
+    tighten: bool = typer.Option(
+        False,
+        "--tighten",
+        help="Then hold both ends, lift them a little and pull them apart until the rope is taut; exit 0 "
+        "only if the tightened rope ties the goal's knot (stored with the run).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
     """Re-simulate a run's plan from its initial configuration; exit 0 if it still ends in the goal."""
@@ -306,9 +341,10 @@ def replay_command(
 
     store = open_db(ctx)
     try:
-        result = replay(store, run_id)
+        result = replay(store, run_id, tighten=tighten)
     except PlanInputError as exc:
         fail(str(exc))
+    ok = result.ties_goal if tighten else result.reached_goal
     if as_json:
         typer.echo(
             json.dumps(
@@ -325,6 +361,15 @@ def replay_command(
                         }
                         for step in result.steps
                     ],
+                    **(
+                        {
+                            "goal_knot_types": sorted(result.goal.knot_types),
+                            "tightened": _tightened_dict(result.tightened),
+                            "ties_goal": result.ties_goal,
+                        }
+                        if tighten
+                        else {}
+                    ),
                 }
             )
         )
@@ -343,4 +388,20 @@ def replay_command(
             else "[bold red]does not reach the goal[/]"
         )
         console.print(f"run {run_id}: the replayed plan {verdict} {result.goal.label}", highlight=False)
-    raise typer.Exit(EXIT_OK if result.reached_goal else EXIT_NOT_REACHED)
+        if tighten:
+            t = result.tightened
+            wanted = ", ".join(sorted(result.goal.knot_types)) or "no knot (the goal state is a knotoid)"
+            if t is None:
+                console.print("pull test: not run (the replay did not finish)", highlight=False)
+            elif not t.ok:
+                console.print(f"pull test: [bold red]rejected[/] ({t.reason})", highlight=False)
+            else:
+                verdict = "[bold green]ties[/]" if result.ties_goal else "[bold red]does not tie[/]"
+                console.print(
+                    f"pull test: the tightened rope is {t.knot.describe()} (P-data {t.p_data.key}, ends "
+                    f"{t.end_distance_m:.2f} m apart, {t.sim_seconds:.1f} s simulated in "
+                    f"{t.wall_seconds:.2f} s): "
+                    f"it {verdict} the goal's knot ({wanted})",
+                    highlight=False,
+                )
+    raise typer.Exit(EXIT_OK if ok else EXIT_NOT_REACHED)

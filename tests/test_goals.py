@@ -24,6 +24,9 @@ from twisted.topology import EMPTY, parse_p_data
 
 runner = CliRunner()
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
+# the README's old "overhand": under the table a trefoil, over it the unknot (a knotoid, not a knot)
+README_KNOTOID = '[[1,"O",5,"-"],[2,"U",6,"-"],[3,"O",4,"+"],[4,"U",3,"+"],[5,"U",1,"-"],[6,"O",2,"-"]]'
+TREFOIL_PLUS = '[[1,"O",4,"+"],[2,"U",5,"+"],[3,"O",6,"+"],[4,"U",1,"+"],[5,"O",2,"+"],[6,"U",3,"+"]]'
 
 
 def _cli(db: str, *args: str) -> tuple[int, str]:
@@ -34,25 +37,72 @@ def _cli(db: str, *args: str) -> tuple[int, str]:
 # --- the goal itself --------------------------------------------------------------------------------
 
 
-def test_overhand_goal_is_every_three_crossing_trefoil() -> None:
+def test_overhand_goal_is_every_three_crossing_state_that_really_ties_a_trefoil() -> None:
     goal = knot_goal("overhand")
     assert goal.knot == "overhand" and goal.crossings == 3 and goal.cross == 3
     assert goal.spec == "knot:overhand@3"
-    assert all(p.cross == 3 and identify(p).name in ("3_1+", "3_1-") for p in goal.states)
-    # ... and nothing else among the 3-crossing states
+    # the four alternating states (two per chirality): both closures are the trefoil
+    assert len(goal.states) == 4
+    for p in goal.states:
+        k = identify(p)
+        assert p.cross == 3 and k.is_knot and k.under.name == k.over.name == k.name in ("3_1+", "3_1-")
+    # ... and nothing else among the 3-crossing states: knotoids whose under-closure is a trefoil are out
     others = [p for p in enumerate_states(3)[3] if p not in goal]
     assert others and not any(identify(p).name.startswith("3_1") for p in others)
+    # the old goal (under-closure a trefoil) had 48 states: 44 of them are knotoids
+    assert sum(identify(p).under.name.startswith("3_1") for p in others) == 44
+    assert parse_p_data(README_KNOTOID) not in goal
     # one chirality is half of it
     right = knot_goal("overhand+")
-    assert set(right.keys) < set(goal.keys)
+    assert set(right.keys) < set(goal.keys) and len(right.states) == 2
     assert {identify(p).name for p in right.states} == {"3_1+"}
+    assert goal.knot_types == {"3_1+", "3_1-"} and right.knot_types == {"3_1+"}
 
 
-def test_fewer_crossings_than_the_knot_only_when_asked() -> None:
-    # two crossings tie a trefoil through the closing arc only (the end tucked inside a loop)
-    two = knot_goal("overhand", 2)
-    assert two.crossings == 2 and two.states and all(p.cross == 2 for p in two.states)
-    assert knot_goal("figure-eight").crossings == 4
+def test_knots_need_their_crossing_number_more_crossings_when_asked() -> None:
+    # two crossings tie a trefoil through the under-closure only (the end tucked inside a loop): knotoids
+    with pytest.raises(GoalError, match="no rope state with 2 crossings ties the knot 'overhand'"):
+        knot_goal("overhand", 2)
+    with pytest.raises(GoalError, match="no rope state with 3 crossings ties the knot 'figure-eight'"):
+        knot_goal("figure-eight", 3)
+    figure_eight = knot_goal("figure-eight")
+    assert figure_eight.crossings == 4 and len(figure_eight.states) == 8
+    assert all(identify(p).name == "4_1" for p in figure_eight.states)
+    four = knot_goal("overhand", 4)
+    assert four.crossings == 4 and len(four.states) == 140 and four.spec == "knot:overhand@4"
+    assert all(p.cross == 4 and identify(p).is_knot for p in four.states)
+
+
+def test_composite_knot_goals_are_built_at_six_crossings() -> None:
+    granny, square = knot_goal("granny"), knot_goal("square")
+    assert granny.crossings == square.crossings == granny.cross == 6
+    assert granny.spec == "knot:granny@6" and square.spec == "knot:square@6"
+    assert len(granny.states) == len(square.states) == 48 and not granny.keys & square.keys
+    assert granny.knot_types == {"3_1+#3_1+", "3_1-#3_1-"} and square.knot_types == {"3_1+#3_1-"}
+    assert {identify(p).name for p in square.states} == {"3_1+#3_1-"}
+    assert goal_from_spec("reef") == knot_goal("reef", 6) and goal_from_spec("reef").keys == square.keys
+
+
+def test_knot_types_and_the_pull_test_verdict() -> None:
+    """What a tightened rope must tie: a knot goal's types; a state goal's knot, or nothing for a knotoid."""
+    overhand = knot_goal("overhand")
+    assert overhand.tightened_ties("3_1+") and overhand.tightened_ties("3_1-")
+    assert not overhand.tightened_ties("0_1") and not overhand.tightened_ties("knotoid")
+    assert not overhand.tightened_ties(None)  # the pull test failed: no knot
+    assert not overhand.tightened_ties("3_1+#3_1+")
+    trefoil = state_goal(parse_p_data(TREFOIL_PLUS))
+    assert (
+        trefoil.knot_types == {"3_1+"}
+        and trefoil.tightened_ties("3_1+")
+        and not trefoil.tightened_ties("3_1-")
+    )
+    knotoid = state_goal(parse_p_data(README_KNOTOID))
+    assert knotoid.knot_types == frozenset()
+    assert not any(knotoid.tightened_ties(t) for t in ("0_1", "3_1-", "knotoid", None))
+    assert state_goal(parse_p_data(ONE_CROSSING)).knot_types == {"0_1"}
+    assert knot_goal("granny").tightened_ties("3_1-#3_1-") and not knot_goal("granny").tightened_ties(
+        "3_1+#3_1-"
+    )
 
 
 def test_specs_round_trip_and_name_the_bad_part() -> None:
@@ -60,9 +110,15 @@ def test_specs_round_trip_and_name_the_bad_part() -> None:
         assert goal_from_spec(goal.spec) == goal
     assert goal_from_spec("figure-eight@4") == knot_goal("figure-eight", 4)
     assert goal_from_spec("overhand") == knot_goal("overhand")
-    with pytest.raises(GoalError, match="unknown knot name 'granny'.*overhand"):
-        goal_from_spec("granny")
-    with pytest.raises(GoalError, match="crossings must be 1 to 5"):
+    assert goal_from_spec("knot:granny@6") == goal_from_spec("granny") == knot_goal("granny")
+    with pytest.raises(GoalError, match="unknown knot name 'bowline'.*overhand.*granny"):
+        goal_from_spec("bowline")
+    with pytest.raises(GoalError, match="a knotoid is not a knot"):
+        goal_from_spec("knotoid")
+    with pytest.raises(GoalError, match="crossings must be 1 to 6"):
+        knot_goal("overhand", 7)
+    # prime knots are enumerated, and never beyond 5 crossings (6 would be millions of states)
+    with pytest.raises(GoalError, match="would have to be enumerated"):
         knot_goal("overhand", 6)
     with pytest.raises(GoalError, match="straight rope"):
         knot_goal("unknot")
@@ -80,12 +136,15 @@ def test_high_level_plans_lead_to_any_member_shortest_first_and_are_cached(sqlit
         found = high_level(store, goal, 20)(EMPTY)
         with store.session() as session:
             stored = session.scalars(select(PlanQuery.goal_key).where(PlanQuery.start_key == EMPTY.key)).all()
-    assert stored == [goal.cache_key] and goal.cache_key.startswith("knot:overhand@3#48:")
-    assert len(found) == 20
+    assert stored == [goal.cache_key] and goal.cache_key.startswith("knot:overhand@3#4:")
+    # only 16 move sequences lead from the straight rope to the four alternating states: all of them
+    assert len(found) == len(plans_to_any(EMPTY, goal.states, 10_000)) == 16
     assert all(plan.states[0] == EMPTY and plan.states[-1] in goal for plan in found)
     lengths = [len(plan.moves) for plan in found]
     assert lengths == sorted(lengths)
-    assert len({plan.states[-1].key for plan in found}) > 5
+    assert len({plan.states[-1].key for plan in found}) >= 2
+    # no plan passes through a state that ties the knot already (plans stop at the first goal state)
+    assert all(p not in goal for plan in found for p in plan.states[:-1])
 
 
 def test_plans_to_any_is_the_union_of_the_members_plans() -> None:
@@ -122,9 +181,11 @@ def test_plan_to_an_overhand_knot_solves_replays_and_is_stored(tmp_path: Path) -
     assert code == 0, out
     result = json.loads(out)
     assert result["solved"] and result["goal"] == "knot:overhand@3" and result["knot"] == "overhand"
+    assert len(result["goal_states"]) == 4 and result["tighten"] is False and result["pull_tests"] == 0
     reached = parse_p_data(result["reached_state"])
     assert result["plan"][-1]["state"] == result["reached_state"]
-    assert reached.cross == 3 and identify(reached).name in ("3_1+", "3_1-")
+    k = identify(reached)
+    assert reached.cross == 3 and k.is_knot and k.under.name == k.over.name == k.name in ("3_1+", "3_1-")
     with open_store(db) as store:
         info = load_run(store, result["run_id"], with_nodes=False)
         assert info is not None and info.goal == knot_goal("overhand")
@@ -161,11 +222,16 @@ def test_knot_runs_resume_by_knot_and_refuse_another_goal(db_url: str) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--knot", "granny"], "unknown knot name"),
+        (["--knot", "bowline"], "unknown knot name"),
+        (["--knot", "knotoid"], "a knotoid is not a knot"),
         (["--knot", "overhand", "--goal", ONE_CROSSING], "exactly one goal"),
         (["--goal", ONE_CROSSING, "--crossings", "3"], "--crossings goes with --knot"),
-        (["--knot", "overhand", "--crossings", "9"], "crossings must be 1 to 5"),
+        (["--knot", "overhand", "--crossings", "9"], "crossings must be 1 to 6"),
         (["--knot", "figure-eight", "--crossings", "1"], "no rope state"),
+        (
+            ["--knot", "overhand", "--crossings", "2"],
+            "no rope state with 2 crossings ties the knot 'overhand'",
+        ),
     ],
 )
 def test_bad_knot_goals_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
@@ -177,12 +243,20 @@ def test_problem_sets_of_knots_feed_eval(tmp_path: Path) -> None:
     db = f"sqlite:///{tmp_path / 'sets.db'}"
     code, out = _cli(db, "problems", "knots", "overhand", "figure-eight@4", "--name", "knots")
     assert code == 0, out
-    code, out = _cli(db, "problems", "knots", "granny", "--name", "bad")
-    assert code == 2 and "knot 1 ('granny')" in out
+    code, out = _cli(db, "problems", "knots", "bowline", "--name", "bad")
+    assert code == 2 and "knot 1 ('bowline')" in out
+    code, out = _cli(db, "problems", "knots", "overhand@2", "--name", "bad")
+    assert code == 2 and "knot 1 ('overhand@2')" in out
+    code, out = _cli(db, "problems", "knots", "granny", "square", "--name", "composite")
+    assert code == 0, out
     with open_store(db) as store:
         with store.session() as session:
             record = load_problem_set(session, "knots")
             assert load_problem_set(session, "bad") is None
+            composite = load_problem_set(session, "composite")
+        assert composite is not None
+        assert [p.goal_key for p in composite.problems] == ["knot:granny@6", "knot:square@6"]
+        assert [p.p_data.cross for p in composite.problems] == [6, 6]
         assert record is not None
         assert [p.goal_key for p in record.problems] == ["knot:overhand@3", "knot:figure-eight@4"]
         assert [p.p_data.cross for p in record.problems] == [3, 4]
@@ -204,7 +278,9 @@ def test_rope_env_takes_knot_goals_like_the_planner(tmp_path: Path) -> None:
     from twisted.envs import goal_pool
 
     assert goal_pool(knot="overhand") == list(knot_goal("overhand").states)
-    assert goal_pool(knot="overhand", knot_crossings=2) == list(knot_goal("overhand", 2).states)
+    assert goal_pool(knot="overhand", knot_crossings=4) == list(knot_goal("overhand", 4).states)
+    with pytest.raises(ValueError, match="no rope state with 2 crossings"):
+        goal_pool(knot="overhand", knot_crossings=2)  # only knotoids: no goal
     db = f"sqlite:///{tmp_path / 'env.db'}"
     assert _cli(db, "problems", "knots", "figure-eight", "--name", "k")[0] == 0
     # a knot goal of a problem set stands for all its states

@@ -1,8 +1,9 @@
 """Planner goals: one P-data state, or every state that ties a named knot.
 
 A goal is a set of topological states; a search succeeds when it reaches any member. ``--goal`` gives a
-set of one; ``--knot overhand [--crossings N]`` gives the enumerated states of N crossings (default: the
-knot's crossing number) whose closure is that knot (:func:`twisted.knots.states_tying`).
+set of one; ``--knot overhand [--crossings N]`` gives the states of N crossings (default: the knot's
+crossing number) that really tie that knot: both closures, under and over the table, are it
+(:func:`twisted.knots.states_tying`; knotoids are never goals).
 
 Goals are written as one line of text, the *goal spec*, wherever a goal must be stored or passed on:
 the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@<crossings>`` for a knot
@@ -82,6 +83,24 @@ class Goal:
         digest = hashlib.sha1("\n".join(p.key for p in self.states).encode()).hexdigest()[:16]
         return f"{self.spec}#{len(self.states)}:{digest}"
 
+    @cached_property
+    def knot_types(self) -> frozenset[str]:
+        """The knot types a rope reaching this goal must tie when pulled tight (the pull test).
+
+        A knot goal: the types its name stands for. A state goal: the knot that state ties (both closures
+        agree), or no type at all when the state is a knotoid (it names no knot).
+        """
+        from twisted.knots import KNOTOID, identify, resolve_knot
+
+        if self.knot is not None:
+            return resolve_knot(self.knot)
+        name = identify(self.states[0]).name
+        return frozenset() if name == KNOTOID else frozenset({name})
+
+    def tightened_ties(self, knot_name: str | None) -> bool:
+        """True when a tightened rope of knot type ``knot_name`` ties what this goal names."""
+        return knot_name is not None and knot_name in self.knot_types
+
     @property
     def label(self) -> str:
         """What a person reads: the knot name and its crossing count, or the P-data key."""
@@ -100,37 +119,41 @@ def state_goal(p_data: PData) -> Goal:
 
 
 def crossing_number(name: str) -> int:
-    """The least crossings of a diagram of knot ``name`` (3 for the overhand knot, 0 for the unknot)."""
-    from twisted.knots import resolve_knot
+    """The least crossings of a rope that ties knot ``name`` (3 for the overhand knot, 6 for granny)."""
+    from twisted.knots import least_crossings
 
-    return min(int(t.split("_")[0]) for t in resolve_knot(name))
+    return least_crossings(name)
 
 
 def knot_goal(name: str, crossings: int | None = None) -> Goal:
-    """Every enumerated state of ``crossings`` crossings that ties ``name``.
+    """Every state of ``crossings`` crossings that really ties ``name`` (both closures are the knot).
 
-    The default is the knot's crossing number (3 for the overhand knot). Ropes with fewer crossings can
-    tie the knot too, but only through the closing arc (the end lies inside a loop and passes under it
-    once lowered below the table): the rope on the table does not show the knot. Ask for them with
-    ``crossings`` (``twisted knots list`` shows the smallest counts).
+    The default is the knot's crossing number (3 for the overhand knot, 4 for the figure-eight, 5 for
+    5_1 and 5_2, 6 for granny and square): no rope with fewer crossings ties it (``twisted knots list``).
+    Prime knots are enumerated up to 5 crossings, composite ones built at 6
+    (:func:`twisted.knots.states_tying`).
     """
-    from twisted.knots import KnotNameError, resolve_knot, states_tying
+    from twisted.knots import KNOTOID, MAX_BUILT_CROSSINGS, KnotNameError, resolve_knot, states_tying
 
+    if name.strip().lower() == KNOTOID:
+        raise GoalError("a knotoid is not a knot: give a knot name (see `twisted knots list`)")
     try:
         resolve_knot(name)
     except KnotNameError as exc:
         raise GoalError(str(exc)) from None
-    if crossings is not None and not 1 <= crossings <= MAX_KNOT_CROSSINGS:
-        raise GoalError(f"--crossings must be 1 to {MAX_KNOT_CROSSINGS} for a knot goal, got {crossings}")
+    if crossings is not None and not 1 <= crossings <= MAX_BUILT_CROSSINGS:
+        raise GoalError(f"--crossings must be 1 to {MAX_BUILT_CROSSINGS} for a knot goal, got {crossings}")
     if crossings is None:
         crossings = crossing_number(name)
         if crossings == 0:
             raise GoalError(f"{name!r} is the straight rope itself: give a knot with crossings")
-    states = [p for p in states_tying(name, crossings, max_crossings=MAX_KNOT_CROSSINGS) if p.cross > 0]
+    try:
+        found = states_tying(name, crossings, max_crossings=MAX_KNOT_CROSSINGS)
+    except ValueError as exc:
+        raise GoalError(str(exc)) from None
+    states = [p for p in found if p.cross > 0]
     if not states:
-        where = f"with {crossings}" if crossings is not None else f"with up to {MAX_KNOT_CROSSINGS}"
-        where += " crossings"
-        raise GoalError(f"no rope state {where} ties the knot {name!r}")
+        raise GoalError(f"no rope state with {crossings} crossings ties the knot {name!r}")
     return Goal(_sorted(states), knot=name, crossings=crossings)
 
 

@@ -1,13 +1,19 @@
-"""Knots by name: which knot a rope state ties (issue 10).
+"""Knots by name: which knot a rope state really ties (issues 10 and 14; docs/DESIGN.md section 9).
 
-Closing the rope. An open rope ties no knot in the strict sense; what a person means by "the rope
-ties an overhand" is the knot we get by lowering both ends below the table and joining them there
-by an arc that passes *under* everything. The knot type of that closure does not depend on the
-arc's path: the rope lies in the half-space ``z > -h/2`` and the closing arc consists of the two
-vertical drops to depth ``-h`` plus a simple arc in the plane ``z = -h``. Any two simple arcs in that
-plane with the same end points are isotopic inside the plane (the plane holds no part of the rope),
-so any two closures are isotopic knots. In a diagram this means: route the closing arc through any
-faces, crossing the rope *under* it wherever it must, and the invariants come out the same.
+Closing the rope. An open rope ties no knot in the strict sense; it needs a closure. Two are natural:
+lower both ends below the table and join them there by an arc that passes *under* everything, or lift
+them and join them above everything (*over*). Each is well defined: the rope lies in a slab, the arc
+consists of two vertical pieces plus a simple arc in a plane outside the slab, and any two simple arcs
+in that plane with the same end points are isotopic there, so any two closures of one kind are
+isotopic knots. In a diagram: route the closing arc through any faces, passing under (over) the rope
+wherever it must, and the invariants come out the same.
+
+The two closures can differ: when an end lies inside a loop, passing under or over the loop's strand
+on the way out decides whether a knot forms. Such a diagram is a knotoid (Turaev, "Knotoids", 2012),
+and pulling the rope's ends apart does not give one answer. So a state ties knot K only when BOTH
+closures are K (:class:`RopeKnot`; true, for example, whenever both ends lie in one face, since then the
+closing arc crosses nothing); otherwise it ties no knot and is named ``"knotoid"``. Under this rule
+each catalogue knot first appears at its crossing number (``bench/bench_knots.py``).
 
 The two routes (they must agree, ``tests/test_knots.py`` checks it on collected data):
 
@@ -16,9 +22,9 @@ The two routes (they must agree, ``tests/test_knots.py`` checks it on collected 
   in the dual graph (faces joined across the segment sides that separate them) gives the closing
   arc. It crosses each segment at most once and enters each face once, so inside every face it is
   one chord and the closed diagram is planar.
-* from link points (:func:`identify_points`): the ends are lowered below the table and joined by a
-  straight segment underneath; the closed polygon is projected to the table and its crossings read
-  as in :func:`twisted.topology.top`.
+* from link points (:func:`identify_points`): the ends are lowered below the table (lifted above the
+  rope) and joined by a straight segment there; the closed polygon is projected to the table and its
+  crossings read as in :func:`twisted.topology.top`.
 
 Invariants (computed here, no dependency):
 
@@ -38,8 +44,9 @@ alternate O/U with one common sign ``+`` ties ``3_1+``. Likewise ``5_1+`` and ``
 positive 5-crossing knots (their Jones polynomials have positive exponents). ``4_1`` is its own
 mirror image.
 
-Identification compares ``(alexander, jones)`` with the catalogue of knots up to five crossings;
-a diagram whose invariants match no entry is ``"unknown"`` (it still carries its invariants).
+Identification compares ``(alexander, jones)`` with the catalogue (the knots up to five crossings and
+the granny and square knots); a diagram whose invariants match no entry is ``"unknown"`` (it still
+carries its invariants).
 Within the catalogue the pair separates every entry; a larger knot with the same pair would be
 misnamed, a risk that does not arise for the small diagrams a 21-link rope makes.
 """
@@ -47,7 +54,7 @@ misnamed, a risk that does not arise for the small diagrams a 21-link rope makes
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import lru_cache
@@ -56,22 +63,28 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.diagram import LEFT, RIGHT, diagram
-from twisted.topology import PData, parse_p_data
+from twisted.topology import PData, PDataError, parse_p_data
 
 __all__ = [
     "CATALOGUE",
+    "KNOTOID",
     "KNOT_NAMES",
     "UNKNOWN",
     "GaussCode",
     "KnotNameError",
     "KnotType",
+    "RopeKnot",
     "closed_gauss_code",
+    "crossing_number",
     "gauss_code_from_polygon",
     "identify",
     "identify_points",
     "invariants",
     "knot_type_name",
+    "least_crossings",
+    "mirror_type",
     "resolve_knot",
+    "rotations",
     "simplify",
     "states_tying",
 ]
@@ -97,9 +110,9 @@ class KnotType:
     @property
     def crossing_number(self) -> int | None:
         """The minimal crossing number for catalogue knots (``3_1+`` -> 3), None when unknown."""
-        if self.name == UNKNOWN:
+        if self.name not in CATALOGUE:
             return None
-        return int(self.name.split("_")[0])
+        return crossing_number(self.name)
 
     @property
     def is_unknot(self) -> bool:
@@ -254,12 +267,14 @@ def _closing_path(p: PData) -> list[tuple[int, str]]:
     return path
 
 
-def closed_gauss_code(p: PData) -> GaussCode:
-    """The closed diagram of rope state ``p``: the rope, then the closing arc under everything.
+def closed_gauss_code(p: PData, over: bool = False) -> GaussCode:
+    """The closed diagram of rope state ``p``: the rope, then the closing arc under (or over) everything.
 
     Rope crossings keep their P-data signs. Where the closing arc passes under segment ``k`` from its
     left side to its right side, the under strand points to the right of the over strand, so the
-    sign is ``-``; from right to left ``+``.
+    sign is ``-``; from right to left ``+``. Passing *over* the segment swaps the strands' roles, so
+    every closing crossing changes sign (``over=True``: the ends are lifted above the table and
+    joined there).
     """
     n = p.cross
     signs = [s for _, _, s in p.crossings()]
@@ -269,18 +284,19 @@ def closed_gauss_code(p: PData) -> GaussCode:
         crossing_of[u] = c
     closing: dict[int, int] = {}  # segment -> new crossing id
     closing_events: list[tuple[int, bool]] = []
+    flip = -1 if over else 1
     for seg, side in _closing_path(p):
         c = len(signs)
-        signs.append(-1 if side == LEFT else 1)
+        signs.append(flip * (-1 if side == LEFT else 1))
         closing[seg] = c
-        closing_events.append((c, False))
+        closing_events.append((c, over))
     events: list[tuple[int, bool]] = []
     for k in range(2 * n + 1):
         if k > 0:
             v = p.visits[k - 1]
             events.append((crossing_of[k], v.over == "O"))
         if k in closing:
-            events.append((closing[k], True))
+            events.append((closing[k], not over))
     events.extend(closing_events)
     return GaussCode(tuple(events), tuple(signs))
 
@@ -566,53 +582,160 @@ def _mirror_jones(jones: dict[int, int]) -> dict[int, int]:
     return {-e: c for e, c in jones.items()}
 
 
+def _times(a: dict[int, int], b: dict[int, int]) -> dict[int, int]:
+    """Product of two Laurent polynomials (exponent -> coefficient)."""
+    return _loop_poly(a, b)
+
+
+def _alexander_times(a: tuple[int, ...], b: tuple[int, ...]) -> tuple[int, ...]:
+    out = [0] * (len(a) + len(b) - 1)
+    for i, x in enumerate(a):
+        for j, y in enumerate(b):
+            out[i + j] += x * y
+    return tuple(out)
+
+
 # Jones polynomials of the positive (right-handed) versions; the "-" ones are their mirrors.
 _J31 = {1: 1, 3: 1, 4: -1}
 _J51 = {2: 1, 4: 1, 5: -1, 6: 1, 7: -1}
 _J52 = {1: 1, 2: -1, 3: 2, 4: -1, 5: 1, 6: -1}
+_A31 = (1, -1, 1)
+# Composite knots: the Alexander and Jones polynomials of a connected sum are the products of the
+# summands' (docs/DESIGN.md section 9.3). Granny and square share Alexander polynomial and determinant
+# (9); the Jones polynomial tells them apart (the square knot's is symmetric: it is its own mirror).
 CATALOGUE: dict[str, KnotType] = {
     k.name: k
     for k in (
         _entry("0_1", (1,), {0: 1}),
-        _entry("3_1+", (1, -1, 1), _J31),
-        _entry("3_1-", (1, -1, 1), _mirror_jones(_J31)),
+        _entry("3_1+", _A31, _J31),
+        _entry("3_1-", _A31, _mirror_jones(_J31)),
         _entry("4_1", (-1, 3, -1), {-2: 1, -1: -1, 0: 1, 1: -1, 2: 1}),
         _entry("5_1+", (1, -1, 1, -1, 1), _J51),
         _entry("5_1-", (1, -1, 1, -1, 1), _mirror_jones(_J51)),
         _entry("5_2+", (2, -3, 2), _J52),
         _entry("5_2-", (2, -3, 2), _mirror_jones(_J52)),
+        _entry("3_1+#3_1+", _alexander_times(_A31, _A31), _times(_J31, _J31)),
+        _entry("3_1-#3_1-", _alexander_times(_A31, _A31), _mirror_jones(_times(_J31, _J31))),
+        _entry("3_1+#3_1-", _alexander_times(_A31, _A31), _times(_J31, _mirror_jones(_J31))),
     )
 }
 _BY_INVARIANTS = {(k.alexander, k.jones): k.name for k in CATALOGUE.values()}
+assert len(_BY_INVARIANTS) == len(CATALOGUE), "the catalogue's invariants must separate its entries"
+
+
+def crossing_number(knot_type: str) -> int:
+    """The minimal crossing number of a catalogue type: ``3_1+`` -> 3, ``3_1+#3_1-`` -> 6.
+
+    (Additivity of the crossing number under connected sum holds for these alternating summands.)
+    """
+    if knot_type not in CATALOGUE:
+        raise ValueError(f"{knot_type!r} is not a catalogue knot type")
+    return sum(int(part.split("_")[0]) for part in knot_type.split("#"))
+
+
+def mirror_type(knot: KnotType) -> KnotType:
+    """The mirror image: the Jones polynomial at ``1/t``, the name's chirality signs swapped."""
+    jones = tuple(sorted((-e, c) for e, c in knot.jones))
+    name = _BY_INVARIANTS.get((knot.alexander, jones), UNKNOWN)
+    writhe = None if knot.writhe is None else -knot.writhe
+    return KnotType(name, knot.alexander, knot.determinant, jones, writhe)
 
 
 # ---------------------------------------------------------------------------------------------
-# Identification
+# Identification: both closures
+
+
+KNOTOID = "knotoid"
+
+
+@dataclass(frozen=True, slots=True)
+class RopeKnot:
+    """What an open rope ties: its two closures, and the knot when they agree.
+
+    ``under``: the ends lowered below the table and joined there (the closing arc passes under
+    everything); ``over``: the ends lifted and joined above everything. When both closures are the
+    same knot, pulling the ends apart cannot change it (the ends can be led out either way), and the
+    rope ties that knot: :attr:`name` is its catalogue name (``"unknown"`` outside the catalogue).
+    When they differ the diagram is a proper knotoid (Turaev 2012): an end lies inside a loop and what
+    the rope becomes depends on which way the end leaves; :attr:`name` is ``"knotoid"`` and no knot
+    is tied.
+    """
+
+    under: KnotType
+    over: KnotType
+
+    @property
+    def is_knot(self) -> bool:
+        """True when both closures are the same knot (by their invariants)."""
+        return self.under == self.over
+
+    @property
+    def name(self) -> str:
+        """The knot's name when both closures agree, else ``"knotoid"`` (the store's ``knot_type``)."""
+        return self.under.name if self.is_knot else KNOTOID
+
+    @property
+    def knot(self) -> KnotType | None:
+        """The knot tied (both closures), None for a knotoid."""
+        return self.under if self.is_knot else None
+
+    def describe(self) -> str:
+        """``3_1+`` for a knot, ``knotoid: under 3_1-, over 0_1`` otherwise."""
+        if self.is_knot:
+            return self.name
+        return f"{KNOTOID}: under {self.under.name}, over {self.over.name}"
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready: name, both closures with their invariants."""
+
+        def one(k: KnotType) -> dict[str, object]:
+            return {
+                "knot_type": k.name,
+                "alexander": list(k.alexander),
+                "determinant": k.determinant,
+                "jones": [list(t) for t in k.jones],
+                "writhe": k.writhe,
+            }
+
+        return {
+            "knot_type": self.name,
+            "is_knot": self.is_knot,
+            "under": one(self.under),
+            "over": one(self.over),
+        }
 
 
 @lru_cache(maxsize=1 << 16)
-def identify(p: PData) -> KnotType:
-    """The knot rope state ``p`` ties: closed under everything through its faces, then identified."""
-    return invariants(closed_gauss_code(parse_p_data(p)))
+def identify(p: PData) -> RopeKnot:
+    """What rope state ``p`` ties: both closures (under and over the table) through its faces, named."""
+    q = parse_p_data(p)
+    return RopeKnot(invariants(closed_gauss_code(q)), invariants(closed_gauss_code(q, over=True)))
 
 
-def identify_points(points: npt.ArrayLike, depth_m: float = 1.0) -> KnotType:
-    """The knot a rope with these centreline points (head first, shape (N, 3)) ties.
+def identify_points(points: npt.ArrayLike, depth_m: float = 1.0) -> RopeKnot:
+    """What a rope with these centreline points (head first, shape (N, 3)) ties: both closures.
 
-    Both ends are lowered ``depth_m`` below the table and joined there by a straight segment; the
-    closed polygon is projected to the table (its vertical drops project to the tips themselves).
+    For the under closure both ends are lowered ``depth_m`` below the rope's lowest point (and the
+    table) and joined there by a straight segment; for the over closure they are lifted ``depth_m``
+    above its highest point. Each closed polygon is projected to the table (its vertical segments
+    project to the tips themselves).
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
         raise ValueError(f"points must have shape (N>=2, 3), got {pts.shape}")
     low = min(float(pts[:, 2].min()), 0.0) - depth_m
-    tail_low = np.array([pts[-1, 0], pts[-1, 1], low])
-    head_low = np.array([pts[0, 0], pts[0, 1], low])
-    return invariants(gauss_code_from_polygon(np.vstack([pts, tail_low, head_low])))
+    high = float(pts[:, 2].max()) + depth_m
+
+    def closed(z: float) -> KnotType:
+        tail = np.array([pts[-1, 0], pts[-1, 1], z])
+        head = np.array([pts[0, 0], pts[0, 1], z])
+        return invariants(gauss_code_from_polygon(np.vstack([pts, tail, head])))
+
+    return RopeKnot(closed(low), closed(high))
 
 
 def knot_type_name(p: PData) -> str:
-    """Shorthand for ``identify(p).name`` (what the store's ``knot_type`` column holds)."""
+    """Shorthand for ``identify(p).name``: the knot, or ``"knotoid"`` (the store's ``knot_type``)."""
     return identify(p).name
 
 
@@ -645,6 +768,15 @@ KNOT_NAMES: dict[str, frozenset[str]] = {
     "5_2": frozenset({"5_2+", "5_2-"}),
     "5_2+": frozenset({"5_2+"}),
     "5_2-": frozenset({"5_2-"}),
+    "granny": frozenset({"3_1+#3_1+", "3_1-#3_1-"}),
+    "granny+": frozenset({"3_1+#3_1+"}),
+    "granny-": frozenset({"3_1-#3_1-"}),
+    "3_1+#3_1+": frozenset({"3_1+#3_1+"}),
+    "3_1-#3_1-": frozenset({"3_1-#3_1-"}),
+    "square": frozenset({"3_1+#3_1-"}),
+    "reef": frozenset({"3_1+#3_1-"}),
+    "3_1+#3_1-": frozenset({"3_1+#3_1-"}),
+    "3_1-#3_1+": frozenset({"3_1+#3_1-"}),
 }
 
 
@@ -660,6 +792,12 @@ def resolve_knot(name: str) -> frozenset[str]:
 # States that tie a knot
 
 
+# Enumerating every state stops here (5 crossings: 130,304 states, ~30 s); 6 would be millions.
+MAX_ENUMERATED_CROSSINGS = 5
+# Composite knots are built up to this many crossings (see _composite_states).
+MAX_BUILT_CROSSINGS = 6
+
+
 @lru_cache(maxsize=16)
 def _states_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
     from twisted.moves import enumerate_states
@@ -670,29 +808,107 @@ def _states_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
     return {name: tuple(states) for name, states in out.items()}
 
 
-def states_tying(name: str, crossings: int | None = None, max_crossings: int = 4) -> list[PData]:
-    """Enumerated states (reachable by moves) with ``crossings`` crossings that tie knot ``name``.
+def _shifted(p: PData, offset: int) -> list[tuple[int, int, int]]:
+    return [(o + offset, u + offset, s) for o, u, s in p.crossings()]
 
-    ``crossings=None`` takes the smallest count up to ``max_crossings`` that has any such state (an
-    empty list when none does). The closure adds crossings, so that count can be below the knot's
-    crossing number: a 2-crossing rope whose head passes over, under, under, over (one sign) already
-    ties a trefoil once its ends are joined underneath. Enumerating 5-crossing
-    states takes tens of seconds, so it happens only when asked for (``crossings=5`` or
-    ``max_crossings=5``); results are cached per count. Sorted by key.
+
+def rotations(p: PData) -> list[PData]:
+    """The open diagrams made by cutting the closure of ``p`` at each of its edges, in both directions.
+
+    Meant for a state whose ends lie in one face: its closing arc then crosses nothing, the closed
+    diagram has the same crossings, and cutting it at another edge gives a state with the same two
+    closures (a rotation of the visit sequence; the reverse walks it tail to head). States that
+    cannot be drawn are skipped.
+    """
+    from twisted.moves import parse_state
+
+    m = len(p.visits)
+    out: dict[str, PData] = {}
+    for r in range(max(m, 1)):
+        triples = [(((o - 1 - r) % m) + 1, ((u - 1 - r) % m) + 1, s) for o, u, s in p.crossings()]
+        for q in (PData.from_crossings(triples),):
+            for candidate in (q, q.reverse()):
+                try:
+                    out.setdefault(candidate.key, parse_state(candidate))
+                except PDataError:
+                    continue
+    return sorted(out.values(), key=lambda q: q.key)
+
+
+@lru_cache(maxsize=16)
+def _composite_states(knot_type: str, crossings: int) -> tuple[PData, ...]:
+    """States of ``crossings`` crossings that tie the composite ``knot_type``, built from its summands.
+
+    A minimal diagram of a connected sum of alternating knots is visibly composite (Menasco 1984): one
+    summand's diagram, then the other's. So: a rope that ties the first summand (ends in one face)
+    followed by a rope that ties the second, every cut of that closed diagram (:func:`rotations`), and
+    only the states whose two closures are both ``knot_type`` are kept. Only the states whose ends lie
+    in one face are found this way (``tests/test_knots.py`` checks that below 6 crossings every state
+    tying a knot at its crossing number has its ends in one face).
+    """
+    parts = knot_type.split("#")
+    if len(parts) != 2:
+        raise ValueError(f"{knot_type!r} is not a composite of two knots")
+    first, second = parts
+    c1, c2 = crossing_number(first), crossing_number(second)
+    if c1 + c2 != crossings:
+        return ()
+    found: dict[str, PData] = {}
+    for order in ((first, second), (second, first)):
+        heads = [p for p in _states_by_type(crossing_number(order[0])).get(order[0], ()) if _ends_together(p)]
+        tails = [p for p in _states_by_type(crossing_number(order[1])).get(order[1], ()) if _ends_together(p)]
+        for a in heads:
+            for b in tails:
+                joined = PData.from_crossings(_shifted(a, 0) + _shifted(b, len(a.visits)))
+                for q in rotations(joined):
+                    if q.key not in found and identify(q).name == knot_type:
+                        found[q.key] = q
+    return tuple(sorted(found.values(), key=lambda q: q.key))
+
+
+def _ends_together(p: PData) -> bool:
+    head_face, tail_face = diagram(p).end_faces()
+    return head_face == tail_face
+
+
+def least_crossings(name: str) -> int:
+    """The default crossing count of a knot goal: the knot's crossing number (the least over its types).
+
+    A state ties a knot only when both closures are it; ``bench/bench_knots.py`` and the tests check up
+    to 5 crossings that no state with fewer crossings than the crossing number does.
+    """
+    return min(crossing_number(t) for t in resolve_knot(name))
+
+
+def states_tying(name: str, crossings: int | None = None, max_crossings: int = 4) -> list[PData]:
+    """States (reachable by moves) with ``crossings`` crossings that really tie knot ``name``.
+
+    Both closures of each state are the knot (:class:`RopeKnot`): knotoids are never included.
+    ``crossings=None`` takes :func:`least_crossings` (3 for the overhand knot, 6 for granny and
+    square); ``max_crossings`` bounds the count that may be enumerated. Up to
+    :data:`MAX_ENUMERATED_CROSSINGS` every state is enumerated (5 crossings take tens of seconds, cached
+    per count); composite knots at 6 crossings are built from their summands
+    (:func:`_composite_states`). Sorted by key.
     """
     types = resolve_knot(name)
-    if crossings is not None:
-        if crossings < 0:
-            raise ValueError(f"crossings must be >= 0, got {crossings}")
-        counts: Iterable[int] = [crossings]
-    else:
-        # the closing arc passes under at most n segments of an n-crossing rope (it enters each of
-        # the n + 1 faces once), so a knot of crossing number c needs n >= c / 2 rope crossings
-        least = min(int(t.split("_")[0]) for t in types)
-        counts = range((least + 1) // 2, max_crossings + 1)
-    for c in counts:
-        by_type = _states_by_type(c)
-        found = sorted((p for t in types for p in by_type.get(t, ())), key=lambda p: p.key)
-        if found or crossings is not None:
-            return found
-    return []
+    if crossings is None:
+        crossings = least_crossings(name)
+    if crossings < 0:
+        raise ValueError(f"crossings must be >= 0, got {crossings}")
+    found: list[PData] = []
+    for t in sorted(types):
+        if "#" in t and crossings > MAX_ENUMERATED_CROSSINGS:
+            if crossings > MAX_BUILT_CROSSINGS:
+                raise ValueError(
+                    f"states of {crossings} crossings are not built (at most {MAX_BUILT_CROSSINGS})"
+                )
+            found.extend(_composite_states(t, crossings))
+        elif crossings > min(max_crossings, MAX_ENUMERATED_CROSSINGS):
+            raise ValueError(
+                f"{name}: states of {crossings} crossings would have to be enumerated; at most "
+                f"{min(max_crossings, MAX_ENUMERATED_CROSSINGS)} are (only composite knots are built at "
+                f"{MAX_BUILT_CROSSINGS})"
+            )
+        else:
+            found.extend(_states_by_type(crossings).get(t, ()))
+    return sorted(found, key=lambda p: p.key)

@@ -77,7 +77,7 @@ __all__ = [
 PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
 
-# The inverse model encodes goals of up to 6 crossings (DESIGN section 6: the reference truncated to 3).
+# The model encodes goals of up to 6 crossings (docs/DESIGN.md section 6.1: the reference truncated to 3).
 MAX_GOAL_CROSS = 6
 
 
@@ -93,6 +93,8 @@ class PlannerOptions:
     plan_limit: int = 100  # high-level plans kept per reached state
     seed: int = 0
     ucb_c: float = 0.7  # exploration weight of the ucb heuristic (rewards lie in [0, 1])
+    # success means "reached a goal state and the pull test ties the goal's knot" (twisted.sim.tighten)
+    tighten: bool = False
 
     def validate(self) -> None:
         """Raise ValueError naming the option that is out of range."""
@@ -119,6 +121,7 @@ class PlannerOptions:
             "plan_limit": self.plan_limit,
             "seed": self.seed,
             "ucb_c": self.ucb_c,
+            "tighten": self.tighten,
         }
 
     @classmethod
@@ -376,9 +379,14 @@ class Twisted:
         self.goal_node: Node | None = None
         for p_data in tree.states.values():
             self._reached(p_data)
-        reached = [tree.by_state[key][0] for key in self.goal.keys if key in tree.by_state]
-        if reached:
-            self.goal_node = tree.nodes[min(reached)]
+        self.pull_tests = 0
+        self._tighten_sim: Any = None
+        # a resumed run: the first node in a goal state (that passes the pull test with --tighten)
+        reached = sorted(i for key in self.goal.keys for i in tree.by_state.get(key, ()))
+        for index in reached:
+            if self._accepts(tree.nodes[index], record=False):
+                self.goal_node = tree.nodes[index]
+                break
 
         self._saved = len(tree)  # nodes already in the store
         self._t0: float | None = None  # set while run() is searching
@@ -629,9 +637,25 @@ class Twisted:
         )
         if p_data.key not in self.plans:
             self._reached(p_data)
-        if self.goal_node is None and p_data in self.goal:
+        if self.goal_node is None and p_data in self.goal and self._accepts(node):
             self.goal_node = node
         return node
+
+    def _accepts(self, node: Node, record: bool = True) -> bool:
+        """Whether a node in a goal state ends the search: always, or with ``tighten`` when the rope pulled
+        tight ties the goal's knot (the pull test is deterministic; a resume re-runs it unrecorded)."""
+        if not self.options.tighten:
+            return True
+        from twisted.sim.tighten import tighten, tightening_sim
+
+        if self._tighten_sim is None:
+            self._tighten_sim = tightening_sim()
+        result = tighten(self._tighten_sim, node.q)
+        ties = result.ok and self.goal.tightened_ties(result.knot_name)
+        self.pull_tests += 1
+        if record and self.recorder is not None and hasattr(self.recorder, "record_tightening"):
+            self.recorder.record_tightening(node, result, self.goal, ties)
+        return ties
 
     def _reached(self, p_data: PData) -> None:
         """A state reached for the first time: run the high level from it (through the plan cache)."""
@@ -922,14 +946,26 @@ class ReplayResult:
     run_id: int
     goal: Goal
     steps: list[ReplayStep]
+    # with tighten=True: the pull test of the replayed final rope (None when it was not run)
+    tightened: Any = None
 
     @property
     def reached_goal(self) -> bool:
         return bool(self.steps) and self.steps[-1].replayed in self.goal
 
+    @property
+    def ties_goal(self) -> bool:
+        """The replayed rope reached the goal and, pulled tight, ties the goal's knot."""
+        t = self.tightened
+        return self.reached_goal and t is not None and t.ok and self.goal.tightened_ties(t.knot_name)
 
-def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult:
-    """Re-simulate a solved run's plan from its initial configuration, in this process."""
+
+def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool = False) -> ReplayResult:
+    """Re-simulate a solved run's plan from its initial configuration, in this process.
+
+    ``tighten``: then pull the final rope tight (:mod:`twisted.sim.tighten`) and store the pull test with
+    the run (table ``tightenings``).
+    """
     from twisted.sim import Curve, RopeSim
     from twisted.sim.pool import simulate
     from twisted.store.search import load_run, solution_path
@@ -943,6 +979,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult
     sim = RopeSim(friction_scale)
     state = path[0].q
     steps = []
+    final_p_data = None
     for node in path[1:]:
         assert node.curve is not None
         curve = Curve(*node.curve)
@@ -950,5 +987,19 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0) -> ReplayResult
         steps.append(ReplayStep(curve, node.p_data, result.p_data if result.ok else None, result.reason))
         if result.state is None:
             break
-        state = result.state
-    return ReplayResult(run_id, info.goal, steps)
+        state, final_p_data = result.state, result.p_data
+    out = ReplayResult(run_id, info.goal, steps)
+    if tighten and final_p_data is not None:
+        from twisted.sim.tighten import tighten as pull
+        from twisted.sim.tighten import tightening_sim
+        from twisted.store.knots import record_tightening
+
+        out.tightened = pull(tightening_sim(friction_scale), state)
+        goal = info.goal
+        with store.session(write=True) as session:
+            record_tightening(
+                session, out.tightened, final_p_data, run_id=run_id, node_seq=path[-1].seq,
+                goal_knot=goal.knot if goal.knot is not None else ",".join(sorted(goal.knot_types)) or None,
+                ties_goal=out.ties_goal,
+            )
+    return out

@@ -456,6 +456,19 @@ def render_goal(store: Any | None, p_data: PData, out: str | Path) -> Rendered:
     return Rendered([save_png(fig, out)], "knot")
 
 
+def _solved_run(store: Any, run_id: int) -> tuple[Any, list[Any]]:
+    """A planner run and the stored path of its plan; RenderError when there is none to draw."""
+    from twisted.store.search import load_run, solution_path
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise RenderError(f"run {run_id} is not a planner run in this database")
+    path = solution_path(store, run_id)
+    if not path:
+        raise RenderError(f"run {run_id} found no plan (outcome: {info.outcome}); nothing to draw")
+    return info, path
+
+
 def render_run(
     store: Any, run_id: int, out_png: str | Path, out_gif: str | Path | None = None, *, gl: bool = True
 ) -> Rendered:
@@ -466,14 +479,8 @@ def render_run(
     curve as an arrow.
     """
     from twisted.knots import knot_type_name
-    from twisted.store.search import load_run, solution_path
 
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        raise RenderError(f"run {run_id} is not a planner run in this database")
-    path = solution_path(store, run_id)
-    if not path:
-        raise RenderError(f"run {run_id} found no plan (outcome: {info.outcome}); nothing to draw")
+    info, path = _solved_run(store, run_id)
     images, backend = gl_top_views([n.q for n in path]) if gl else (None, "OpenGL not requested (--no-gl)")
     n_steps = len(path) - 1
 
@@ -484,6 +491,7 @@ def render_run(
         goal_mark = ""
         if node.p_data in info.goal:
             tied = f" ({info.goal.knot}: {knot_type_name(node.p_data)})" if info.goal.knot else ""
+            # knot_type_name: the knot when both closures agree, else "knotoid"
             goal_mark = f"  = goal{tied}"
         draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
         next_curve = path[i + 1].curve if i < n_steps else None
@@ -496,6 +504,41 @@ def render_run(
         frames = [figure_to_array(frame(i), dpi=80) for i in range(len(path))]
         files.append(save_gif(frames, out_gif, frame_s=1.0, last_frame_s=3.0))
     return Rendered(files, backend if images is not None else f"matplotlib ({backend})")
+
+
+def render_tightened(store: Any, run_id: int, out_png: str | Path) -> Rendered:
+    """A run's final rope beside the same rope pulled tight (its newest stored pull test).
+
+    The pull test is stored by ``twisted replay --tighten`` / ``twisted plan --tighten``; both panels are
+    drawn from link points, each titled with what the rope ties (both closures).
+    """
+    from twisted.knots import identify
+    from twisted.store.knots import tightenings
+
+    info, path = _solved_run(store, run_id)
+    with store.session() as session:
+        tests = [t for t in tightenings(session, run_id) if t.ok and t.points is not None]
+    final = path[-1]
+    tests = [t for t in tests if t.node_seq == final.seq] or tests
+    if not tests:
+        raise RenderError(f"run {run_id} has no pull test stored: run `twisted replay {run_id} --tighten`")
+    test = tests[-1]
+    fig, (ax_plan, ax_taut) = plt.subplots(1, 2, figsize=(12.8, 5.2))
+    draw_knot_diagram(
+        ax_plan,
+        final.points,
+        title=f"run {run_id}, end of the plan: {identify(final.p_data).describe()}\n{final.p_data.key}",
+    )
+    assert test.points is not None
+    verdict = "ties" if test.ties_goal else "does NOT tie"
+    wanted = info.goal.knot or ", ".join(sorted(info.goal.knot_types)) or "no knot"
+    draw_knot_diagram(
+        ax_taut,
+        test.points,
+        title=f"both ends pulled apart ({test.end_distance_m or 0:.2f} m): {test.knot_after}\n"
+        f"{verdict} the goal's knot ({wanted})",
+    )
+    return Rendered([save_png(fig, out_png)], "matplotlib (link points)")
 
 
 # ---------------------------------------------------------------- MuJoCo offscreen top view

@@ -1,4 +1,4 @@
-"""MJCF of the rope and the gripper (DESIGN.md section 2), built in code once per simulator.
+"""MJCF of the rope and the gripper (docs/DESIGN.md section 2), built in code once per simulator.
 
 The rope is an explicit body chain (no ``composite``, no plugin): 21 capsule links whose body
 frames sit at the link centres with the local x axis pointing from the head (link 0) towards the
@@ -30,7 +30,7 @@ FRICTION = (1.0, 0.005, 0.0001)  # MuJoCo's default (sliding, torsional, rolling
 
 @dataclass(frozen=True)
 class RopeParams:
-    """Physical and numerical settings of the rope model (defaults: DESIGN.md section 3)."""
+    """Physical and numerical settings of the rope model (defaults: docs/DESIGN.md section 2.4)."""
 
     timestep_s: float = 0.005
     friction_scale: float = 1.0
@@ -75,7 +75,7 @@ def _hinges(i: int, anchor_x: float) -> str:
 
 def _link_geom(i: int) -> str:
     # Along local x; the end points are read from the joint anchors, never from the geom's axis
-    # (a ``fromto`` capsule's local z runs from "to" back to "from", DESIGN.md pitfall).
+    # (a ``fromto`` capsule's local z runs from "to" back to "from", docs/DESIGN.md section 2.5).
     h = LINK_HALF_LENGTH_M
     return f'<geom name="{link_name(i)}" class="rope" fromto="{_fmt(-h, 0, 0, h, 0, 0)}"/>'
 
@@ -95,8 +95,17 @@ def _chain(i: int, step: int) -> str:
     return f'<body name="{link_name(i)}" pos="{pos}">{joint}{_link_geom(i)}{_chain(i + step, step)}</body>'
 
 
-def rope_xml(params: RopeParams = RopeParams()) -> str:
-    """The MJCF text of the straight rope along x, centred at the origin, resting on the table."""
+TAIL_GRIPPER = "tail_gripper"
+TAIL_WELD = "hold_tail"
+
+
+def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> str:
+    """The MJCF text of the straight rope along x, centred at the origin, resting on the table.
+
+    ``tail_gripper`` adds a second mocap body and one inactive weld of it to the tail link (the pull
+    test of :mod:`twisted.sim.tighten` holds the head with the first gripper, the tail with this one).
+    Neither adds a degree of freedom: states are the same vectors as without it.
+    """
     mu = _fmt(*(f * params.friction_scale for f in FRICTION))
     lim = params.joint_limit_deg
     welds = "".join(
@@ -104,6 +113,14 @@ def rope_xml(params: RopeParams = RopeParams()) -> str:
         f'relpose="0 0 0 1 0 0 0" solref="{_fmt(*params.weld_solref)}"/>'
         for i in range(N_LINKS)
     )
+    second = ""
+    if tail_gripper:
+        second = f'<body name="{TAIL_GRIPPER}" mocap="true" pos="0 0 0.5"/>'
+        welds += (
+            f'<weld name="{TAIL_WELD}" body1="{TAIL_GRIPPER}" body2="{link_name(N_LINKS - 1)}" '
+            f'active="false" '
+            f'relpose="0 0 0 1 0 0 0" solref="{_fmt(*params.weld_solref)}"/>'
+        )
     middle = (
         f'<body name="{link_name(MIDDLE_LINK)}" pos="{_fmt(0, 0, LINK_RADIUS_M)}">'
         f'<freejoint name="root"/>{_link_geom(MIDDLE_LINK)}'
@@ -127,6 +144,7 @@ def rope_xml(params: RopeParams = RopeParams()) -> str:
     <body name="gripper" mocap="true" pos="0 0 0.5">
       <site name="gripper" size="0.005" rgba="0.1 0.6 0.1 0.5"/>
     </body>
+    {second}
     {middle}
   </worldbody>
   <equality>{welds}</equality>

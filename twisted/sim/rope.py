@@ -1,6 +1,6 @@
 """RopeSim: the MuJoCo rope, its state, its link points and one curve action ``f(q, c) -> q'``.
 
-A curve ``c = (link, z_max, x, y)`` (DESIGN.md section 3): weld the gripper to ``link``, carry it
+A curve ``c = (link, z_max, x, y)`` (docs/DESIGN.md section 3): weld the gripper to ``link``, carry it
 along a straight line to ``(x, y)`` away from where it lies, with minimum-jerk timing and a height
 arc on top, release it a little above the table (or as soon as it lands on another strand), and
 step until the rope has settled. The result depends only on ``state()`` and the curve: every
@@ -141,11 +141,13 @@ def minimum_jerk(tau: FloatArray) -> FloatArray:
 class RopeSim:
     """The rope on the table with a mocap gripper; one MuJoCo model built once per instance."""
 
-    def __init__(self, friction_scale: float = 1.0, timestep_s: float = DEFAULT_TIMESTEP_S) -> None:
+    def __init__(
+        self, friction_scale: float = 1.0, timestep_s: float = DEFAULT_TIMESTEP_S, tail_gripper: bool = False
+    ) -> None:
         if not (math.isfinite(friction_scale) and friction_scale > 0):
             raise ValueError(f"friction_scale must be a positive number, got {friction_scale!r}")
         self.params = RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
-        self.model = mujoco.MjModel.from_xml_string(rope_xml(self.params))
+        self.model = mujoco.MjModel.from_xml_string(rope_xml(self.params, tail_gripper=tail_gripper))
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._link_body = np.array([m.body(link_name(i)).id for i in range(N_LINKS)])

@@ -1,4 +1,8 @@
-"""Knot questions over the foundation tables (``topological_states.knot_type``, revision 0006).
+"""Knot questions over the foundation tables (``topological_states.knot_type``, revisions 0006 and 0010).
+
+``knot_type`` is the knot a state really ties (both closures agree) or ``"knotoid"``; the closures are
+``closure_under`` / ``closure_over``. ``tightenings`` (0010) holds the pull tests
+(:mod:`twisted.sim.tighten`) run by ``twisted replay --tighten`` and ``twisted plan --tighten``.
 
 The same answers are in the views ``knot_visits`` and ``knots_tied`` for a sqlite3/psql shell;
 :func:`knots_tied` reads its view (it spans two areas' tables: configurations and planner trees).
@@ -9,14 +13,35 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
-from sqlalchemy import DateTime, Integer, String, column, func, select, table
-from sqlalchemy.orm import Session
+import numpy as np
+import numpy.typing as npt
+from sqlalchemy import (
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    column,
+    func,
+    select,
+    table,
+)
+from sqlalchemy.orm import Mapped, Session, mapped_column
 
-from twisted.store.models import Configuration, TopologicalState
+from twisted.store.models import Base, Configuration, TopologicalState, array_to_blob, blob_to_array, utcnow
+from twisted.store.queries import get_or_create_state
 
 __all__ = [
     "KNOT_VIEW_NAMES",
+    "Tightening",
+    "TighteningRecord",
+    "record_tightening",
+    "tightenings",
     "KnotTied",
     "KnotVisits",
     "configurations_per_state",
@@ -104,3 +129,108 @@ def configurations_per_state(session: Session, keys: Iterable[str]) -> dict[str,
         ).all()
         out.update({key: int(n) for key, n in rows})
     return out
+
+
+# --- pull tests (revision 0010) ------------------------------------------------------------------------
+
+
+class Tightening(Base):
+    """One pull test: a configuration (stored, or a node of run ``run_id``'s tree), before and after."""
+
+    __tablename__ = "tightenings"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int | None] = mapped_column(ForeignKey("runs.id"), index=True)
+    configuration_id: Mapped[int | None] = mapped_column(ForeignKey("configurations.id"))
+    node_seq: Mapped[int | None] = mapped_column(Integer)  # search_nodes.seq of the node pulled
+    state_id: Mapped[int] = mapped_column(ForeignKey("topological_states.id"))
+    tightened_state_id: Mapped[int | None] = mapped_column(ForeignKey("topological_states.id"))
+    knot_before: Mapped[str | None] = mapped_column(String(64))  # RopeKnot.describe() of the state
+    knot_after: Mapped[str | None] = mapped_column(String(64))  # ... of the tightened rope
+    goal_knot: Mapped[str | None] = mapped_column(String(64))  # what it had to tie (a name), if any
+    ties_goal: Mapped[bool | None] = mapped_column(Boolean)
+    ok: Mapped[bool] = mapped_column(Boolean)  # False: the simulation was rejected (reason)
+    reason: Mapped[str | None] = mapped_column(Text)
+    end_distance_m: Mapped[float | None] = mapped_column(Float)
+    sim_seconds: Mapped[float] = mapped_column(Float)
+    wall_seconds: Mapped[float] = mapped_column(Float)
+    points: Mapped[bytes | None] = mapped_column(LargeBinary)  # the tightened rope's 22 link points
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+@dataclass(frozen=True, slots=True)
+class TighteningRecord:
+    """A stored pull test, read back."""
+
+    id: int
+    run_id: int | None
+    node_seq: int | None
+    knot_before: str | None
+    knot_after: str | None
+    goal_knot: str | None
+    ties_goal: bool | None
+    ok: bool
+    reason: str | None
+    end_distance_m: float | None
+    sim_seconds: float
+    wall_seconds: float
+    points: npt.NDArray[np.float64] | None
+
+
+def record_tightening(
+    session: Session,
+    result: Any,
+    state: Any,
+    *,
+    run_id: int | None = None,
+    configuration_id: int | None = None,
+    node_seq: int | None = None,
+    goal_knot: str | None = None,
+    ties_goal: bool | None = None,
+) -> int:
+    """Store a :class:`twisted.sim.tighten.Tightened` of the rope in P-data ``state``; returns its id."""
+    from twisted.knots import identify
+
+    row = Tightening(
+        run_id=run_id,
+        configuration_id=configuration_id,
+        node_seq=node_seq,
+        state_id=get_or_create_state(session, state).id,
+        tightened_state_id=None if result.p_data is None else get_or_create_state(session, result.p_data).id,
+        knot_before=identify(state).describe(),
+        knot_after=None if result.knot is None else result.knot.describe(),
+        goal_knot=goal_knot,
+        ties_goal=ties_goal,
+        ok=bool(result.ok),
+        reason=result.reason,
+        end_distance_m=result.end_distance_m,
+        sim_seconds=float(result.sim_seconds),
+        wall_seconds=float(result.wall_seconds),
+        points=None if result.points is None else array_to_blob(result.points),
+    )
+    session.add(row)
+    session.flush()
+    return int(row.id)
+
+
+def tightenings(session: Session, run_id: int) -> list[TighteningRecord]:
+    """The pull tests stored with run ``run_id``, oldest first."""
+    rows = session.scalars(select(Tightening).where(Tightening.run_id == run_id).order_by(Tightening.id))
+    return [
+        TighteningRecord(
+            r.id,
+            r.run_id,
+            r.node_seq,
+            r.knot_before,
+            r.knot_after,
+            r.goal_knot,
+            r.ties_goal,
+            r.ok,
+            r.reason,
+            r.end_distance_m,
+            r.sim_seconds,
+            r.wall_seconds,
+            None if r.points is None else blob_to_array(r.points, (-1, 3)),
+        )
+        for r in rows
+    ]

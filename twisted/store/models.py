@@ -93,7 +93,9 @@ class Run(Base):
 class TopologicalState(Base):
     """A distinct P-data state; ``key`` is ``PData.key`` (compact JSON), ``cross`` its crossing count.
 
-    ``knot_type`` (revision 0006) names the knot the state ties (:func:`twisted.knots.identify`).
+    ``knot_type`` (revision 0006, meaning fixed by 0010) names the knot the state really ties: both
+    closures (``closure_under``, ``closure_over``: the ends joined under / over the table) are that knot;
+    ``"knotoid"`` when they differ (:class:`twisted.knots.RopeKnot`).
     """
 
     __tablename__ = "topological_states"
@@ -102,8 +104,10 @@ class TopologicalState(Base):
     key: Mapped[str] = mapped_column(Text, unique=True)
     p_data: Mapped[list[Any]] = mapped_column(JSON)
     cross: Mapped[int] = mapped_column(Integer, index=True)
-    # twisted.knots.identify(p_data).name: the knot the rope ties when closed under everything (0006)
+    # twisted.knots.identify(p_data).name: the knot both closures agree on, or "knotoid" (0006, 0010)
     knot_type: Mapped[str | None] = mapped_column(String(16), index=True)
+    closure_under: Mapped[str | None] = mapped_column(String(16))  # 0010
+    closure_over: Mapped[str | None] = mapped_column(String(16))  # 0010
 
 
 class Configuration(Base):

@@ -114,12 +114,13 @@ def mark_stale_runs(session: Session, kind: str) -> list[int]:
 # --- states and configurations ---------------------------------------------------------------------------
 
 
-def _knot_type(p_data: PData) -> str | None:
-    """The knot ``p_data`` ties (None for P-data that cannot be drawn in the plane)."""
+def _knot_columns(p_data: PData) -> dict[str, str | None]:
+    """``knot_type`` and both closures of ``p_data`` (None for P-data that cannot be drawn in the plane)."""
     try:
-        return identify(p_data).name
+        k = identify(p_data)
     except PDataError:
-        return None
+        return {"knot_type": None, "closure_under": None, "closure_over": None}
+    return {"knot_type": k.name, "closure_under": k.under.name, "closure_over": k.over.name}
 
 
 def get_or_create_state(session: Session, p_data: PData) -> TopologicalState:
@@ -129,7 +130,7 @@ def get_or_create_state(session: Session, p_data: PData) -> TopologicalState:
         return state
     session.execute(
         _insert(session, TopologicalState)
-        .values(key=p_data.key, p_data=p_data.to_list(), cross=p_data.cross, knot_type=_knot_type(p_data))
+        .values(key=p_data.key, p_data=p_data.to_list(), cross=p_data.cross, **_knot_columns(p_data))
         .on_conflict_do_nothing(index_elements=["key"])
     )
     return session.scalars(select(TopologicalState).where(TopologicalState.key == p_data.key)).one()

@@ -1,0 +1,181 @@
+"""The pull test (issue 14): hold both ends, lift them a little, pull them apart; a real knot stays, a
+knotoid (an end tucked in a loop) comes out.
+
+Simulation is real: short seeded plans (``--seed 4`` reaches an overhand in a few seconds of search with
+the shipped model, one worker) on a tmp store, then ``twisted replay --tighten``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cli.main import app
+from twisted.knots import identify
+from twisted.planner import straight_rope
+from twisted.sim.mjcf import LINK_RADIUS_M, ROPE_LENGTH_M
+from twisted.sim.tighten import Tightened, tighten, tightening_sim
+from twisted.store import open_store
+from twisted.store.knots import tightenings
+from twisted.topology import EMPTY, parse_p_data, top
+
+runner = CliRunner()
+SEED = "4"
+# two crossings, the end tucked in a loop: under the table a trefoil, over it the unknot
+KNOTOID_2 = '[[1,"U",3,"+"],[2,"O",4,"+"],[3,"O",1,"+"],[4,"U",2,"+"]]'
+
+
+def _cli(db: str, *args: str) -> tuple[int, str]:
+    result = runner.invoke(app, ["--db", db, *args])
+    return result.exit_code, result.output
+
+
+def _json(out: str) -> dict:
+    return json.loads(out[out.index("{") : out.rindex("}") + 1])
+
+
+def _plan(db: str, *args: str) -> dict:
+    code, out = _cli(db, "plan", *args, "--workers", "1", "--seed", SEED, "--timeout", "120", "--json")
+    assert code == 0, out
+    result = _json(out)
+    assert result["solved"], result
+    return result
+
+
+@pytest.fixture(scope="module")
+def overhand_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, dict]:
+    """A stored plan (no pull test during the search) from the straight rope to an overhand knot."""
+    db = f"sqlite:///{tmp_path_factory.mktemp('tighten') / 'overhand.db'}"
+    return db, _plan(db, "--knot", "overhand")
+
+
+# --- the pull test itself ------------------------------------------------------------------------------
+
+
+def test_the_straight_rope_pulled_tight_is_the_unknot_with_its_ends_a_rope_length_apart() -> None:
+    q, _, p = straight_rope()
+    assert p == EMPTY
+    sim = tightening_sim()
+    result = tighten(sim, q)
+    assert isinstance(result, Tightened)
+    assert result.ok and result.reason is None, result.reason
+    assert result.p_data == EMPTY and result.knot is not None
+    assert result.knot.is_knot and result.knot_name == "0_1"
+    assert result.knot.under.name == result.knot.over.name == "0_1"
+    assert result.end_distance_m == pytest.approx(ROPE_LENGTH_M, abs=0.02)  # 0.84 m: taut, not stretched
+    assert result.points is not None and result.points.shape == (22, 3)
+    # lifted "a little": the ends are held just above the table, the rope did not fly
+    assert result.points[:, 2].min() > 0 and result.points[:, 2].max() < 4 * LINK_RADIUS_M
+    assert result.sim_seconds > 0 and result.wall_seconds > 0
+    # deterministic given the state (it starts from set_state like every curve)
+    again = tighten(sim, q)
+    assert again.end_distance_m == result.end_distance_m and np.array_equal(again.points, result.points)
+
+
+def test_the_pull_test_needs_the_second_gripper() -> None:
+    from twisted.sim import RopeSim
+
+    q, _, _ = straight_rope()
+    with pytest.raises(ValueError, match="tail gripper"):
+        tighten(RopeSim(), q)
+
+
+# --- from a stored plan ----------------------------------------------------------------------------------
+
+
+def test_a_tightened_overhand_from_a_stored_plan_stays_a_trefoil(overhand_run: tuple[str, dict]) -> None:
+    db, result = overhand_run
+    run_id = result["run_id"]
+    reached = parse_p_data(result["reached_state"])
+    before = identify(reached)
+    assert before.is_knot and before.name in ("3_1+", "3_1-")
+    assert result["tighten"] is False and result["pull_tests"] == 0
+
+    code, out = _cli(db, "replay", str(run_id), "--tighten", "--json")
+    assert code == 0, out
+    replayed = _json(out)
+    assert replayed["reached_goal"] is True and replayed["ties_goal"] is True
+    assert replayed["goal_knot_types"] == ["3_1+", "3_1-"]
+    t = replayed["tightened"]
+    assert t["ok"] is True and t["reason"] is None
+    # the same trefoil, same chirality, under both closures: pulling did not undo (or mirror) it
+    assert t["knot_type"] == before.name
+    assert t["knot"]["is_knot"] is True
+    assert t["knot"]["under"]["knot_type"] == t["knot"]["over"]["knot_type"] == before.name
+    assert identify(parse_p_data(t["p_data"])).name == before.name
+    # the knot holds rope: the ends are apart but closer than the rope is long
+    assert 0.2 < t["end_distance_m"] < ROPE_LENGTH_M - 0.05
+    assert t["sim_seconds"] > 0
+
+    # stored with the run
+    with open_store(db) as store, store.session() as session:
+        [row] = tightenings(session, run_id)
+    assert row.ok and row.ties_goal is True and row.goal_knot == "overhand"
+    assert row.knot_before == before.name and row.knot_after == before.name
+    assert row.end_distance_m == pytest.approx(t["end_distance_m"])
+    assert row.points is not None and row.points.shape == (22, 3)
+    assert top(row.points) == parse_p_data(t["p_data"])  # the stored points are the tightened rope
+
+    # the text form says so too; without --tighten nothing is pulled (nor stored)
+    code, out = _cli(db, "replay", str(run_id), "--tighten")
+    flat = " ".join(out.split())
+    assert code == 0 and f"the tightened rope is {before.name}" in flat and "ties the goal's knot" in flat
+    code, out = _cli(db, "replay", str(run_id), "--json")
+    assert code == 0 and "tightened" not in _json(out)
+    with open_store(db) as store, store.session() as session:
+        assert len(tightenings(session, run_id)) == 2  # one per --tighten replay
+
+
+def test_render_draws_the_plan_beside_the_tightened_knot(
+    overhand_run: tuple[str, dict], tmp_path: Path
+) -> None:
+    db, result = overhand_run
+    png = tmp_path / "tight.png"
+    code, out = _cli(db, "render", "--run", str(result["run_id"]), "--tightened", "--out", str(png))
+    assert code == 0, out
+    assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plan_with_tighten_ends_only_on_a_goal_state_that_passes_the_pull_test(tmp_path: Path) -> None:
+    db = f"sqlite:///{tmp_path / 'plan-tighten.db'}"
+    result = _plan(db, "--knot", "overhand", "--tighten")
+    assert result["tighten"] is True and result["pull_tests"] >= 1
+    reached = parse_p_data(result["reached_state"])
+    with open_store(db) as store, store.session() as session:
+        stored = tightenings(session, result["run_id"])
+    # every pull test of the search is stored; the last one is the success that ended it
+    assert len(stored) == result["pull_tests"]
+    assert stored[-1].ok and stored[-1].ties_goal is True
+    assert stored[-1].knot_before == identify(reached).name == stored[-1].knot_after
+    assert all(not t.ties_goal for t in stored[:-1])
+    # a tightened-plan run replays and passes its pull test again
+    code, out = _cli(db, "replay", str(result["run_id"]), "--tighten", "--json")
+    assert code == 0 and _json(out)["ties_goal"] is True, out
+
+
+def test_a_knotoid_goal_pulls_out_to_the_unknot_and_replay_tighten_exits_3(tmp_path: Path) -> None:
+    """The end tucked in a loop is not a knot: the rope reaches the state, but pulled tight it comes out
+    straight; the state names no knot, so the pull test cannot pass (exit 3)."""
+    assert identify(parse_p_data(KNOTOID_2)).describe() == "knotoid: under 0_1, over 3_1+"
+    db = f"sqlite:///{tmp_path / 'knotoid.db'}"
+    result = _plan(db, "--goal", KNOTOID_2)
+    run_id = str(result["run_id"])
+    assert _cli(db, "replay", run_id)[0] == 0  # it reaches the state
+    code, out = _cli(db, "replay", run_id, "--tighten", "--json")
+    assert code == 3, out
+    replayed = _json(out)
+    assert replayed["reached_goal"] is True and replayed["ties_goal"] is False
+    assert replayed["goal_knot_types"] == []
+    t = replayed["tightened"]
+    assert t["ok"] is True and t["knot_type"] == "0_1" and t["knot"]["is_knot"] is True
+    assert t["end_distance_m"] > ROPE_LENGTH_M - 0.1  # nothing left to hold rope
+    with open_store(db) as store, store.session() as session:
+        [row] = tightenings(session, result["run_id"])
+    assert row.knot_before == "knotoid: under 0_1, over 3_1+" and row.knot_after == "0_1"
+    assert row.ties_goal is False and row.goal_knot is None
+    code, out = _cli(db, "replay", run_id, "--tighten")
+    assert code == 3 and "does not tie" in " ".join(out.split())

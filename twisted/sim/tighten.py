@@ -1,0 +1,168 @@
+"""The pull test: hold both rope ends, lift them a little, pull them apart until the rope is taut.
+
+A knot we name must survive being pulled tight (docs/DESIGN.md section 9.5). The test re-simulates from a
+stored configuration:
+
+1. *grasp*: the head link is welded to the usual gripper and the tail link to a second mocap gripper
+   (:data:`twisted.sim.mjcf.TAIL_GRIPPER`), each exactly where the link lies;
+2. *lift and align*: both grippers rise by :data:`LIFT_M` while turning the end links (yaw only) to
+   point along the pull direction, the line from the head tip to the tail tip on the table;
+3. *pull*: the grippers move apart along that line at :data:`PULL_SPEED_M_S` each, slowly enough that
+   the penetration check of every step (:meth:`RopeSim._step`, deeper than a radius is an error, never
+   a silent pass-through) holds, until the rope resists: a gripper leads its link by more than
+   :data:`TAUT_LAG_M` (the weld stretches only under tension);
+4. *hold*: the grippers stop and the taut rope settles for :data:`HOLD_S`; then its link points give the
+   P-data and :func:`twisted.knots.identify` the knot. The ends are now far apart and outside the knot,
+   so both closures agree unless something is wrong (the result says so).
+
+Deterministic given the state: it starts from ``set_state`` like every curve.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import numpy.typing as npt
+
+from twisted.knots import RopeKnot, identify
+from twisted.sim.mjcf import LINK_RADIUS_M, N_LINKS, ROPE_LENGTH_M, TAIL_GRIPPER, TAIL_WELD
+from twisted.sim.rope import RopeSim, minimum_jerk
+from twisted.topology import PData, PDataError, top
+
+FloatArray = npt.NDArray[np.float64]
+
+LIFT_M = 0.5 * LINK_RADIUS_M  # "a little": the end centres clear the table, not the strands on it
+LIFT_S = 0.5
+PULL_SPEED_M_S = 0.05  # each gripper; ~5 link spacings a second
+TAUT_LAG_M = 1.5 * LINK_RADIUS_M
+HOLD_S = 0.5
+# The ends cannot be further apart than the rope is long: a pull that gets there never met the knot.
+MAX_SEPARATION_M = ROPE_LENGTH_M + 0.05
+
+
+@dataclass(frozen=True, slots=True)
+class Tightened:
+    """Outcome of a pull test. ``ok=False`` comes with the reason (the simulation was rejected)."""
+
+    ok: bool
+    reason: str | None
+    p_data: PData | None
+    knot: RopeKnot | None
+    points: FloatArray | None
+    end_distance_m: float | None
+    sim_seconds: float
+    wall_seconds: float
+
+    @property
+    def knot_name(self) -> str | None:
+        """The knot of the tightened rope (``"knotoid"`` when its closures still differ), None if not ok."""
+        return None if self.knot is None else self.knot.name
+
+
+def tightening_sim(friction_scale: float = 1.0) -> RopeSim:
+    """A simulator with the second (tail) gripper the pull test needs; states are interchangeable."""
+    return RopeSim(friction_scale, tail_gripper=True)
+
+
+def _yaw_quat(yaw: float) -> FloatArray:
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def _nlerp(a: FloatArray, b: FloatArray, s: float) -> FloatArray:
+    if float(np.dot(a, b)) < 0:
+        b = -b
+    q = (1 - s) * a + s * b
+    return q / np.linalg.norm(q)
+
+
+def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
+    """Pull the rope in ``state`` tight on ``sim`` (made by :func:`tightening_sim`) and read its knot."""
+    started = time.perf_counter()
+    m, d = sim.model, sim.data
+    try:
+        tail_mocap = int(m.body(TAIL_GRIPPER).mocapid[0])
+        tail_weld = int(m.equality(TAIL_WELD).id)
+    except KeyError:
+        raise ValueError("the pull test needs a simulator with a tail gripper (tightening_sim())") from None
+    head_mocap = sim._gripper
+    head_body, tail_body = int(sim._link_body[0]), int(sim._link_body[N_LINKS - 1])
+    dt = float(m.opt.timestep)
+    steps = 0
+
+    def result(reason: str | None) -> Tightened:
+        wall = time.perf_counter() - started
+        if reason is not None:
+            return Tightened(False, reason, None, None, None, None, steps * dt, wall)
+        mujoco.mj_forward(m, d)
+        points = sim.link_points()
+        try:
+            p = top(points)
+            knot = identify(p)
+        except PDataError as exc:
+            reason = f"tightened rope has no P-data: {exc}"
+            return Tightened(False, reason, None, None, None, None, steps * dt, wall)
+        distance = float(np.linalg.norm(points[-1, :2] - points[0, :2]))
+        return Tightened(True, None, p, knot, points, distance, steps * dt, time.perf_counter() - started)
+
+    def step() -> str | None:
+        nonlocal steps
+        steps += 1
+        return sim._step()
+
+    sim.set_state(state)
+    if (reason := sim.invalid_reason()) is not None:
+        return result(f"invalid start state: {reason}")
+    # 1. grasp both ends where they lie
+    d.eq_active[:] = 0
+    head_pos, tail_pos = d.xpos[head_body].copy(), d.xpos[tail_body].copy()
+    head_quat, tail_quat = d.xquat[head_body].copy(), d.xquat[tail_body].copy()
+    d.mocap_pos[head_mocap], d.mocap_quat[head_mocap] = head_pos, head_quat
+    d.mocap_pos[tail_mocap], d.mocap_quat[tail_mocap] = tail_pos, tail_quat
+    d.eq_active[sim._weld[0]] = 1
+    d.eq_active[tail_weld] = 1
+    tips = sim.link_points()[[0, -1], :2]
+    direction = tips[1] - tips[0]
+    if float(np.linalg.norm(direction)) < 2 * LINK_RADIUS_M:  # ends on top of each other: pull along x
+        direction = np.array([1.0, 0.0])
+    direction = direction / np.linalg.norm(direction)
+    target_quat = _yaw_quat(math.atan2(direction[1], direction[0]))  # links' x axis (head -> tail) along it
+    window = sim._window_steps
+    # 2. lift and align
+    n_lift = max(1, math.ceil(LIFT_S / dt))
+    for k in range(1, n_lift + 1):
+        s = float(minimum_jerk(np.array(k / n_lift)))
+        d.mocap_pos[head_mocap] = head_pos + [0.0, 0.0, LIFT_M * s]
+        d.mocap_pos[tail_mocap] = tail_pos + [0.0, 0.0, LIFT_M * s]
+        d.mocap_quat[head_mocap] = _nlerp(head_quat, target_quat, s)
+        d.mocap_quat[tail_mocap] = _nlerp(tail_quat, target_quat, s)
+        if (reason := step()) is not None:
+            return result(reason)
+    # 3. pull apart along the line until a weld stretches (the rope resists)
+    move = np.array([direction[0], direction[1], 0.0]) * PULL_SPEED_M_S * dt
+    while True:
+        for _ in range(window):
+            d.mocap_pos[head_mocap] -= move
+            d.mocap_pos[tail_mocap] += move
+            if (reason := step()) is not None:
+                return result(reason)
+        if (reason := sim.invalid_reason()) is not None:
+            return result(reason)
+        lag = max(
+            float(np.linalg.norm(d.mocap_pos[head_mocap] - d.xpos[head_body])),
+            float(np.linalg.norm(d.mocap_pos[tail_mocap] - d.xpos[tail_body])),
+        )
+        if lag > TAUT_LAG_M:
+            break
+        if float(np.linalg.norm(d.mocap_pos[tail_mocap] - d.mocap_pos[head_mocap])) > MAX_SEPARATION_M:
+            return result("the ends came further apart than the rope is long, without tension")
+    # 4. hold the taut rope still, then read it
+    for _ in range(max(1, math.ceil(HOLD_S / dt))):
+        if (reason := step()) is not None:
+            return result(reason)
+    if (reason := sim.invalid_reason()) is not None:
+        return result(reason)
+    return result(None)
