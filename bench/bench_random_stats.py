@@ -1,4 +1,4 @@
-"""Random-curve statistics of the simulator next to the reference's (DESIGN.md section 3).
+"""Random-curve statistics of the simulator next to the reference's (docs/DESIGN.md section 3.5).
 
     python bench/bench_random_stats.py 1000 [--workers 2] [--seed 0] [--friction-scale 1.0]
 

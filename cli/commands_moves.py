@@ -1,6 +1,6 @@
 """`twisted moves ...`: successors of a state, the enumeration from the empty rope, BFS plans (cached).
 
-States are read and printed in the P-data JSON of DESIGN section 4; outputs are one JSON value per line.
+States are read and printed as P-data JSON (docs/DESIGN.md section 4); outputs are one JSON value per line.
 """
 
 from __future__ import annotations

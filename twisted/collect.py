@@ -1,4 +1,4 @@
-"""Self-supervised data collection with the D_Q reset scheme (DESIGN.md section 7).
+"""Self-supervised data collection with the D_Q reset scheme (docs/DESIGN.md section 7).
 
 ``D_Q`` is the set of configurations in the store added by ``collect`` runs (the straight rope is put in
 as the root when there is none). Each iteration a worker
@@ -551,7 +551,7 @@ def default_workers() -> int:
 
 # --- statistics ---------------------------------------------------------------------------------------
 
-# Random-curve statistics of the reference simulator (DESIGN.md section 3): P(c -> c+1) per curve.
+# Random-curve statistics of the reference simulator (docs/DESIGN.md section 3.5): P(c -> c+1) per curve.
 REFERENCE_PLUS_ONE_RATE = {0: 0.11, 1: 0.07, 2: 0.03}
 
 

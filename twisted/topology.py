@@ -1,4 +1,4 @@
-"""P-data: the topological state of an open rope (DESIGN.md section 4).
+"""P-data: the topological state of an open rope (docs/DESIGN.md section 4).
 
 A state lists the crossing *visits* met when walking the projected rope from the head (link-0 tip)
 to the tail (link-20 tip). Visit ``p`` (1..2n) records whether the rope passes over (``O``) or
