@@ -7,9 +7,10 @@ tightened ropes tie, the agreement rate and the time per pull test.
 
     python bench/bench_tighten.py --db sqlite:////tmp/copy.db [--per-class 40] [--seed 0]
 
-Agreement for a real knot: the tightened rope ties the same knot. For a knotoid: "unknot" counts the
-tightened ropes that are the unknot (the end left its loop), "over" those that tie the over-closure
-(the lifted end passed over the strand around it), "under" the under-closure.
+Agreement for a real knot: the tightened rope ties the same knot. For a knotoid: "agree" counts the
+tightened ropes that are the unknot (the end left its loop); others tie the other closure (the end
+left over or under the strand around it); the column "closure" counts the ropes that tighten to
+either closure.
 --db opens (and so migrates) the database: point it at a copy.
 """
 
@@ -58,12 +59,13 @@ def main() -> None:
         by_class[label].append((key, q))
     rng = np.random.default_rng(args.seed)
     sim = tightening_sim()
-    print(f"{'class':<34} {'n':>4} {'agree':>6}  tightened to                             ms/test")
+    head = f"{'class':<34} {'n':>4} {'agree':>6} {'closure':>7}  {'tightened to':<40} ms/test"
+    print(head)
     for label in sorted(by_class):
         pool = by_class[label]
         picks = rng.choice(len(pool), size=min(args.per_class, len(pool)), replace=False)
         outcomes: Counter[str] = Counter()
-        agree, wall = 0, 0.0
+        agree, closure, wall = 0, 0, 0.0
         for i in picks:
             key, q = pool[int(i)]
             before = identify(parse_p_data(key))
@@ -76,11 +78,14 @@ def main() -> None:
                 agree += after == before.name
             else:
                 agree += after == "0_1"
+            closure += after in (before.under.name, before.over.name)
         shown = ", ".join(f"{name} {n}" for name, n in outcomes.most_common())
         rate = agree / max(len(picks), 1)
         ms = 1000 * wall / max(len(picks), 1)
-        print(f"{label:<34} {len(picks):>4} {rate:>6.0%}  {shown:<40} {ms:6.0f}")
+        either = closure / max(len(picks), 1)
+        print(f"{label:<34} {len(picks):>4} {rate:>6.0%} {either:>7.0%}  {shown:<40} {ms:6.0f}")
     print("agree: a knot tightens to itself; a knotoid tightens to the unknot")
+    print("closure: the tightened rope ties one of the state's two closures (under or over)")
 
 
 if __name__ == "__main__":

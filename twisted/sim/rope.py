@@ -220,8 +220,11 @@ class RopeSim:
         """``Top(q)``: the P-data of the current configuration."""
         return top(self.link_points())
 
-    def invalid_reason(self) -> str | None:
-        """Why the current configuration is not acceptable, or None when it is."""
+    def invalid_reason(self, workspace_radius_m: float = WORKSPACE_RADIUS_M) -> str | None:
+        """Why the current configuration is not acceptable, or None when it is.
+
+        ``workspace_radius_m``: how far from the origin the rope may be (the pull test, which moves both
+        ends apart wherever the rope lies, allows more than the curves do)."""
         d = self.data
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             return "simulation diverged (NaN or infinity in the state)"
@@ -232,8 +235,8 @@ class RopeSim:
             return f"simulation diverged (MuJoCo warned {names} and reset the rope)"
         pts = self.link_points()
         far = float(np.max(np.linalg.norm(pts, axis=1)))
-        if far > WORKSPACE_RADIUS_M:
-            return f"rope left the workspace ({far:.2f} m from the origin > {WORKSPACE_RADIUS_M} m)"
+        if far > workspace_radius_m:
+            return f"rope left the workspace ({far:.2f} m from the origin > {workspace_radius_m} m)"
         z_min, z_top = float(pts[:, 2].min()), float(pts[:, 2].max())
         if z_min < MIN_HEIGHT_M:
             return f"rope went below the table (centreline at z = {z_min:.4f} m)"

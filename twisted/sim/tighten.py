@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from twisted.knots import RopeKnot, identify
 from twisted.sim.mjcf import LINK_RADIUS_M, N_LINKS, ROPE_LENGTH_M, TAIL_GRIPPER, TAIL_WELD
-from twisted.sim.rope import RopeSim, minimum_jerk
+from twisted.sim.rope import WORKSPACE_RADIUS_M, RopeSim, minimum_jerk
 from twisted.topology import PData, PDataError, top
 
 FloatArray = npt.NDArray[np.float64]
@@ -42,6 +42,9 @@ TAUT_LAG_M = 1.5 * LINK_RADIUS_M
 HOLD_S = 0.5
 # The ends cannot be further apart than the rope is long: a pull that gets there never met the knot.
 MAX_SEPARATION_M = ROPE_LENGTH_M + 0.05
+# The curves' workspace (1.2 m) bounds where a rope may be taken; pulling a rope that lies near its edge
+# carries an end further out, which is no physical fault: the pull test allows a rope length more.
+PULL_WORKSPACE_RADIUS_M = WORKSPACE_RADIUS_M + ROPE_LENGTH_M
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,7 +152,7 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
             d.mocap_pos[tail_mocap] += move
             if (reason := step()) is not None:
                 return result(reason)
-        if (reason := sim.invalid_reason()) is not None:
+        if (reason := sim.invalid_reason(PULL_WORKSPACE_RADIUS_M)) is not None:
             return result(reason)
         lag = max(
             float(np.linalg.norm(d.mocap_pos[head_mocap] - d.xpos[head_body])),
@@ -163,6 +166,6 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
     for _ in range(max(1, math.ceil(HOLD_S / dt))):
         if (reason := step()) is not None:
             return result(reason)
-    if (reason := sim.invalid_reason()) is not None:
+    if (reason := sim.invalid_reason(PULL_WORKSPACE_RADIUS_M)) is not None:
         return result(reason)
     return result(None)
