@@ -513,6 +513,7 @@ def _summary_from_store(
             message=message,
             kept_by_to_cross={int(c): int(n) for c, n in by_cross.items()},
             commit_seconds=commit_s,
+            signum=signals[0] if signals else None,
         )
 
 
