@@ -8,7 +8,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option
 
 rl_app = typer.Typer(
     no_args_is_help=True,
@@ -38,7 +38,7 @@ def _goal_crossings(text: str) -> tuple[int, ...]:
 def train_command(
     ctx: typer.Context,
     steps: int = typer.Option(20_000, "--steps", min=1, help="Environment steps (curves) in all."),
-    seed: int = typer.Option(0, "--seed", help="Seed of goals, exploration and weights."),
+    seed: int = seed_option(0, "Seed of goals, exploration and weights."),
     goal: Annotated[
         list[str] | None,
         typer.Option(
