@@ -296,13 +296,15 @@ def eval_command(
         "twisted", "--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."
     ),
     timeout_s: float = typer.Option(
-        1800.0, "--timeout", help="Search time per goal in seconds (paper: 1800)."
+        1800.0, "--timeout", min=0.0, help="Search time per goal in seconds (paper: 1800)."
     ),
     workers: int = typer.Option(
         1, "--workers", min=1, help="Simulator processes per planner (1 = in-process)."
     ),
     seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
-    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (0.95/1.05)."),
+    friction_scale: float = typer.Option(
+        1.0, "--friction-scale", min=0.01, max=100.0, help="Rope friction factor (0.95/1.05)."
+    ),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
     heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
     model_id: int = typer.Option(
@@ -375,7 +377,7 @@ def sensitivity_run(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set."),
     planner: str = typer.Option("twisted", "--planner"),
-    timeout_s: float = typer.Option(1800.0, "--timeout", help="Search time per goal in seconds."),
+    timeout_s: float = typer.Option(1800.0, "--timeout", min=0.0, help="Search time per goal in seconds."),
     scales: Annotated[
         list[float] | None, typer.Option("--scales", help="Friction factors (default 0.95 1.0 1.05); repeat.")
     ] = None,
@@ -387,6 +389,9 @@ def sensitivity_run(
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
+    for scale in scales or []:
+        if not 0.01 <= scale <= 100:
+            fail(f"--scales: {scale:g} is not a friction factor in 0.01 .. 100")
     check_workers(workers)
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
@@ -435,7 +440,11 @@ def discretise_command(
     to_cross: int = typer.Option(3, "--to-cross", help="... to this crossing count (-1: any)."),
     workers: int = typer.Option(0, "--workers", min=0, help="Simulator processes (0 = one per CPU core)."),
     friction_scale: float = typer.Option(
-        None, "--friction-scale", help="Also re-simulate the unrounded curve at this friction (e.g. 1.05)."
+        None,
+        "--friction-scale",
+        min=0.01,
+        max=100.0,
+        help="Also re-simulate the unrounded curve at this friction (e.g. 1.05).",
     ),
 ) -> None:
     """Discretisation experiment (paper 5.1): share of transitions whose state changes when rounded."""

@@ -89,13 +89,17 @@ def plan_command(
         2, "--workers", help="Simulator processes (1: in this process; at most 4 per CPU core)."
     ),
     seed: int | None = seed_option(None, "Seed of the search (default 0)."),
-    k: int | None = typer.Option(None, "--k", min=1, help="Curves sampled per plan step (default 6)."),
+    k: int | None = typer.Option(
+        None, "--k", min=1, max=1000, help="Curves sampled per plan step (default 6)."
+    ),
     p_expand: float | None = typer.Option(
         None, "--p-expand", min=0.0, max=1.0, help="RandomExpand probability after a failed iteration (0.05)."
     ),
-    k_expand: int | None = typer.Option(None, "--k-expand", min=1, help="Curves per RandomExpand (100)."),
+    k_expand: int | None = typer.Option(
+        None, "--k-expand", min=1, max=100_000, help="Curves per RandomExpand (100)."
+    ),
     plan_limit: int | None = typer.Option(
-        None, "--plan-limit", min=1, help="High-level plans kept per reached state (100)."
+        None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
     model_id: int | None = typer.Option(
         None,

@@ -29,12 +29,14 @@ def train_command(
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     resume: bool = typer.Option(False, "--resume", help="Continue the newest unfinished training run."),
     seed: int = seed_option(0, "Seed of the split, batch order, augmentation and weights."),
-    batch_size: int = typer.Option(256, "--batch-size", min=1),
+    batch_size: int = typer.Option(256, "--batch-size", min=1, max=1_000_000),
     lr: float = typer.Option(1e-3, "--lr", min=0.0, help="Adam learning rate."),
     weight_decay: float = typer.Option(0.0, "--weight-decay", min=0.0, help="AdamW weight decay (0: Adam)."),
-    hidden: int = typer.Option(256, "--hidden", min=8, help="Width of the shared trunk."),
-    layers: int = typer.Option(3, "--layers", min=1, help="Layers of the shared trunk."),
-    components: int = typer.Option(4, "--components", min=1, help="Gaussians per continuous head."),
+    hidden: int = typer.Option(256, "--hidden", min=8, max=8192, help="Width of the shared trunk."),
+    layers: int = typer.Option(3, "--layers", min=1, max=64, help="Layers of the shared trunk."),
+    components: int = typer.Option(
+        4, "--components", min=1, max=256, help="Gaussians per continuous head."
+    ),
     link_head: str = typer.Option(
         "pointer", "--link-head", help="pointer (shared per-link scorer) or dense."
     ),
@@ -47,6 +49,7 @@ def train_command(
         None,
         "--threads",
         min=1,
+        max=1024,
         help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
     ),
     checkpoint_every_s: float = typer.Option(

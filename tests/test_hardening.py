@@ -91,8 +91,24 @@ def plan_db(tmp_path: Path) -> tuple[Path, str]:
     """A store with one stopped planner run (random-low, 1 iteration), run id 1."""
     path = tmp_path / "plan.db"
     url = f"sqlite:///{path}"
-    code, out = _cli("--db", url, "plan", "--goal", THREE_CROSSINGS, "--planner", "random-low",
-                     "--workers", "1", "--max-iterations", "1", "--k", "2", "--p-expand", "0", "--json")
+    code, out = _cli(
+        "--db",
+        url,
+        "plan",
+        "--goal",
+        THREE_CROSSINGS,
+        "--planner",
+        "random-low",
+        "--workers",
+        "1",
+        "--max-iterations",
+        "1",
+        "--k",
+        "2",
+        "--p-expand",
+        "0",
+        "--json",
+    )
     assert code == 3, out
     return path, url
 
@@ -166,10 +182,22 @@ def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest
         return real_make_goal(*args, **kwargs)
 
     monkeypatch.setattr(twisted.planner, "make_goal", slow_goal)
-    code, out = _cli("--db", url, "plan", "--goal", THREE_CROSSINGS, "--planner", "random-low",
-                     "--workers", "1", "--timeout", "4", "--json")
+    code, out = _cli(
+        "--db",
+        url,
+        "plan",
+        "--goal",
+        THREE_CROSSINGS,
+        "--planner",
+        "random-low",
+        "--workers",
+        "1",
+        "--timeout",
+        "4",
+        "--json",
+    )
     assert code == 3, out
-    result = json.loads(out[out.index("{"):])
+    result = json.loads(out[out.index("{") :])
     assert result["setup_s"] >= 0.6 and result["search_time_s"] >= result["setup_s"]
     assert result["search_time_s"] < 4 + 2.0  # no more than one unfinished iteration beyond
 
@@ -177,8 +205,13 @@ def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest
 def test_a_signal_at_start_up_is_not_lost_even_when_the_shell_ignored_it() -> None:
     """A shell starts background jobs with SIGINT ignored (`setsid twisted ... &`); Python keeps it
     ignored, so Ctrl-C was lost until a command installed its own handler."""
-    proc = _proc("moves", "enumerate", "--max-crosses", "5",
-                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    proc = _proc(
+        "moves",
+        "enumerate",
+        "--max-crosses",
+        "5",
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    )
     time.sleep(2.0)  # enumerating (about 30 s in all)
     proc.send_signal(signal.SIGINT)
     try:
@@ -197,8 +230,9 @@ def test_a_signal_while_collect_starts_its_workers_interrupts_the_run(tmp_path: 
     """Before: Ctrl-C in the first second marked the run failed ("worker 1 died (exit code -2)", exit 1,
     4 of 5); SIGTERM exited 130. Now: the run is 'interrupted', exit 128 + signal."""
     path = tmp_path / "c.db"
-    proc = _proc("--db", f"sqlite:///{path}", "collect", "--hours", "0.05", "--workers", "2",
-                 start_new_session=True)
+    proc = _proc(
+        "--db", f"sqlite:///{path}", "collect", "--hours", "0.05", "--workers", "2", start_new_session=True
+    )
     try:
         _wait_for(path, "SELECT COUNT(*) FROM runs", proc)  # the workers are being started now
         os.killpg(proc.pid, signum)  # like Ctrl-C: the whole process group
@@ -233,8 +267,21 @@ def test_a_diverged_training_stores_no_model(tmp_path: Path) -> None:
     fill_store(url, 60)
     code, out = _cli("--db", url, "train", "--epochs", "1", "--lr", "inf")
     assert code == 2 and "--lr" in out and "finite" in out
-    code, out = _cli("--db", url, "train", "--epochs", "1", "--lr", "1e30", "--hidden", "16",
-                     "--batch-size", "64", "--threads", "1")
+    code, out = _cli(
+        "--db",
+        url,
+        "train",
+        "--epochs",
+        "1",
+        "--lr",
+        "1e30",
+        "--hidden",
+        "16",
+        "--batch-size",
+        "64",
+        "--threads",
+        "1",
+    )
     assert code == 1 and "not stored" in out, out
     assert _rows(tmp_path / "t.db", "SELECT COUNT(*) FROM models") == [(0,)]
     assert _rows(tmp_path / "t.db", "SELECT status FROM training_runs") == [("failed",)]
@@ -346,8 +393,13 @@ def test_an_in_memory_database_is_refused(tmp_path: Path) -> None:
 def test_seeds_are_checked_alike_by_every_command(tmp_path: Path) -> None:
     """Before: `--seed -1` was accepted by train, refused by collect, a traceback in plan."""
     url = f"sqlite:///{tmp_path / 'x.db'}"
-    for args in (["train"], ["collect", "--hours", "1"], ["plan", "--goal", ONE_CROSSING],
-                 ["problems", "make"], ["eval", "--set", "easy", "--seeds", "-1"]):
+    for args in (
+        ["train"],
+        ["collect", "--hours", "1"],
+        ["plan", "--goal", ONE_CROSSING],
+        ["problems", "make"],
+        ["eval", "--set", "easy", "--seeds", "-1"],
+    ):
         code, out = _cli("--db", url, *args, *([] if args[0] == "eval" else ["--seed", "-1"]))
         assert code == 2 and "seed" in out.lower(), (args, out)
 
@@ -397,9 +449,25 @@ def test_collect_limits_are_exact(tmp_path: Path) -> None:
     url = f"sqlite:///{path}"
     for args in (["--max-tries", "7"], ["--max-kept", "1", "--max-cross", "1"]):
         proc = subprocess.run(
-            [sys.executable, "-m", "cli.main", "--db", url, "collect", "--hours", "0.05", "--workers", "2",
-             "--seed", "5", *args],
-            cwd=REPO, capture_output=True, text=True, timeout=120,
+            [
+                sys.executable,
+                "-m",
+                "cli.main",
+                "--db",
+                url,
+                "collect",
+                "--hours",
+                "0.05",
+                "--workers",
+                "2",
+                "--seed",
+                "5",
+                *args,
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=120,
         )
         assert proc.returncode == 0, proc.stderr[-2000:]
     assert _rows(path, "SELECT tried, kept FROM runs ORDER BY id")[0][0] == 7
@@ -409,20 +477,35 @@ def test_collect_limits_are_exact(tmp_path: Path) -> None:
 
 def test_render_reports_the_file_it_wrote(tmp_path: Path) -> None:
     """Before: `render --out noext` said it wrote `noext` and wrote `noext.png`."""
-    code, out = _cli("--db", f"sqlite:///{tmp_path / 'x.db'}", "render", "--goal", ONE_CROSSING,
-                     "--out", str(tmp_path / "noext"))
+    code, out = _cli(
+        "--db",
+        f"sqlite:///{tmp_path / 'x.db'}",
+        "render",
+        "--goal",
+        ONE_CROSSING,
+        "--out",
+        str(tmp_path / "noext"),
+    )
     assert code == 0, out
     assert f"wrote {tmp_path / 'noext.png'}" in out and (tmp_path / "noext.png").is_file()
-    code, out = _cli("--db", f"sqlite:///{tmp_path / 'x.db'}", "render", "--goal", ONE_CROSSING,
-                     "--out", str(tmp_path / "x.jpg"))
+    code, out = _cli(
+        "--db",
+        f"sqlite:///{tmp_path / 'x.db'}",
+        "render",
+        "--goal",
+        ONE_CROSSING,
+        "--out",
+        str(tmp_path / "x.jpg"),
+    )
     assert code == 2 and ".png" in out
 
 
 def test_runs_table_of_a_killed_resume_is_taken_over_by_the_next(plan_db: tuple[Path, str]) -> None:
     """SIGKILL leaves the run 'running' with a dead pid: the next --resume takes it over."""
     path, url = plan_db
-    proc = _proc("--db", url, "plan", "--resume", "1", "--workers", "1", "--timeout", "120",
-                 "--checkpoint-every", "0")
+    proc = _proc(
+        "--db", url, "plan", "--resume", "1", "--workers", "1", "--timeout", "120", "--checkpoint-every", "0"
+    )
     try:
         _wait_for(path, "SELECT iteration >= 2 FROM search_checkpoints", proc)
         proc.kill()

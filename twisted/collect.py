@@ -118,6 +118,8 @@ class CollectOptions:
         positive("batch_seconds", self.batch_seconds)
         positive("refresh_seconds", self.refresh_seconds)
         positive("friction_scale", self.friction_scale)
+        if self.friction_scale > 100:
+            raise CollectError(f"--friction-scale must be at most 100, got {self.friction_scale!r}")
         if not (math.isfinite(self.cross_bias) and 0 <= self.cross_bias <= 10):
             raise CollectError(f"--cross-bias must be between 0 and 10, got {self.cross_bias!r}")
         positive("max_kept", self.max_kept, allow_none=True)
