@@ -383,7 +383,7 @@ class SearchRun:
 
     def _update_held_run(self, session: Session, **values: Any) -> None:
         """Update the ``runs`` row if this process still holds the lease, else RunBusyError (rolled back)."""
-        done = session.execute(
+        done: Any = session.execute(
             update(Run)
             .where(Run.id == self.run_id, Run.host == socket.gethostname(), Run.pid == os.getpid())
             .values(**values)
