@@ -10,10 +10,11 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
+from cli.app import EXIT_BAD_INPUT, app, check_workers, console, fail, open_db, seed_option
 
 EXIT_FAILED = 1
-EXIT_INTERRUPTED = 130  # the shell's convention for a run stopped by a signal
+EXIT_INTERRUPTED = 130  # the shell's convention for a run stopped by a signal: 128 + SIGINT (SIGTERM: 143)
+MAX_RAY_WORKERS = 4096  # actors on a cluster; the local bound is per core (check_workers)
 
 
 def _hms(seconds: float) -> str:
@@ -38,9 +39,7 @@ def collect_command(
     workers: int | None = typer.Option(
         None, "--workers", help="Simulation processes (default: the machine's CPU cores)."
     ),
-    seed: int | None = typer.Option(
-        None, "--seed", help="Seed of every random choice (default: random, stored)."
-    ),
+    seed: int | None = seed_option(None, "Seed of every random choice (default: random, stored)."),
     batch_size: int = typer.Option(
         20, "--batch-size", help="Kept transitions per committed batch (also ~2 s)."
     ),
@@ -73,6 +72,10 @@ def collect_command(
     from twisted.collect import CollectError, CollectOptions, CollectProgress, collect, default_workers
     from twisted.distributed import DistributedError, collect_on_ray, import_ray, resolve_address
 
+    if not use_ray:
+        check_workers(workers)
+    elif workers is not None and not 1 <= workers <= MAX_RAY_WORKERS:
+        fail(f"--workers {workers}: give 1 to {MAX_RAY_WORKERS} Ray workers", EXIT_BAD_INPUT)
     try:  # Ray problems first, before any database is created
         address = resolve_address(use_ray, ray_address)
         if use_ray:
@@ -155,7 +158,7 @@ def collect_command(
         fail(f"collect run {summary.run_id} failed: {summary.message}", EXIT_FAILED)
     if summary.status == "interrupted":
         console.print(f"[yellow]{summary.message}[/]; run `twisted collect` again to continue the same D_Q")
-        raise typer.Exit(EXIT_INTERRUPTED)
+        raise typer.Exit(128 + summary.signum if summary.signum else EXIT_INTERRUPTED)
 
 
 @app.command("stats")
@@ -170,7 +173,7 @@ def stats_command(
     """
     from twisted.collect import collection_stats
 
-    store = open_db(ctx, create=False)
+    store = open_db(ctx, create=False, readonly=True)
     from twisted.store.knots import knot_visits
 
     with store:
@@ -259,7 +262,7 @@ def db_command(ctx: typer.Context) -> None:
 
     for module in pkgutil.iter_modules(twisted.store.__path__):
         importlib.import_module(f"twisted.store.{module.name}")
-    store = open_db(ctx, create=False)
+    store = open_db(ctx, create=False, readonly=True)
     with store, store.session() as session:
         revisions = sorted(r[0] for r in session.execute(text("SELECT version_num FROM alembic_version")))
         present = set(inspect(session.connection()).get_table_names())

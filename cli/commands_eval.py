@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -12,7 +13,20 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import app, console, db_url, err_console, fail, open_db
+from cli.app import (
+    MAX_SEED,
+    app,
+    check_workers,
+    console,
+    db_url,
+    err_console,
+    fail,
+    open_db,
+    seed_option,
+    shorten,
+)
+
+MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
 
 problems_app = typer.Typer(
     no_args_is_help=True, help="Goal sets for evaluations (made from our data or imported)."
@@ -43,7 +57,7 @@ def _print_sets(records: list[Any]) -> None:
 @problems_app.command("make")
 def problems_make(
     ctx: typer.Context,
-    seed: int = typer.Option(0, "--seed", help="Seed of the draw; the same seed gives the same sets."),
+    seed: int = seed_option(0, "Seed of the draw; the same seed gives the same sets."),
     per_set: int = typer.Option(10, "--per-set", min=1, help="Goals per set (10 in the paper)."),
     prefix: str = typer.Option("", "--prefix", help="Prefix of the set names (e.g. 's1-' -> s1-easy)."),
     replace: bool = typer.Option(
@@ -245,11 +259,15 @@ def _parse_seeds(text: str) -> list[int]:
                 first, last = int(lo), int(hi)
                 if last < first:
                     raise ValueError
-                seeds.update(range(first, last + 1))
             else:
-                seeds.add(int(part))
+                first = last = int(part)
         except ValueError:
-            fail(f"--seeds: {part!r} is not a seed or a range like 0-4 (give e.g. '0 1 2' or '0-4')")
+            fail(f"--seeds: {shorten(part)!r} is not a seed or a range like 0-4 (give e.g. '0 1 2' or '0-4')")
+        if first < 0 or last > MAX_SEED:
+            fail(f"--seeds: {shorten(part)!r}: seeds are 0 to 2**63-1")
+        if last - first + 1 + len(seeds) > MAX_SEEDS:
+            fail(f"--seeds: at most {MAX_SEEDS:,} seeds per goal")
+        seeds.update(range(first, last + 1))
     if not seeds:
         fail("--seeds: give at least one seed")
     return sorted(seeds)
@@ -278,13 +296,15 @@ def eval_command(
         "twisted", "--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."
     ),
     timeout_s: float = typer.Option(
-        1800.0, "--timeout", help="Search time per goal in seconds (paper: 1800)."
+        1800.0, "--timeout", min=0.0, help="Search time per goal in seconds (paper: 1800)."
     ),
     workers: int = typer.Option(
         1, "--workers", min=1, help="Simulator processes per planner (1 = in-process)."
     ),
     seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
-    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (0.95/1.05)."),
+    friction_scale: float = typer.Option(
+        1.0, "--friction-scale", min=0.01, max=100.0, help="Rope friction factor (0.95/1.05)."
+    ),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
     heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
     model_id: int = typer.Option(
@@ -312,6 +332,9 @@ def eval_command(
             import_ray()
     except DistributedError as exc:
         fail(str(exc))
+    check_workers(workers)
+    if not use_ray:
+        check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
     _eval(
         ctx,
@@ -354,7 +377,7 @@ def sensitivity_run(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set."),
     planner: str = typer.Option("twisted", "--planner"),
-    timeout_s: float = typer.Option(1800.0, "--timeout", help="Search time per goal in seconds."),
+    timeout_s: float = typer.Option(1800.0, "--timeout", min=0.0, help="Search time per goal in seconds."),
     scales: Annotated[
         list[float] | None, typer.Option("--scales", help="Friction factors (default 0.95 1.0 1.05); repeat.")
     ] = None,
@@ -366,6 +389,11 @@ def sensitivity_run(
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
+    for scale in scales or []:
+        if not 0.01 <= scale <= 100:
+            fail(f"--scales: {scale:g} is not a friction factor in 0.01 .. 100")
+    check_workers(workers)
+    check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
     options = _planner_options(heuristic, model_id)
     for scale in scales or [0.95, 1.0, 1.05]:
@@ -407,17 +435,22 @@ def sensitivity_plot(
 def discretise_command(
     ctx: typer.Context,
     n: int = typer.Option(1000, "--n", min=1, help="Stored transitions to re-simulate."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the draw of transitions."),
+    seed: int = seed_option(0, "Seed of the draw of transitions."),
     from_cross: int = typer.Option(2, "--from-cross", help="Transitions from this crossing count (-1: any)."),
     to_cross: int = typer.Option(3, "--to-cross", help="... to this crossing count (-1: any)."),
     workers: int = typer.Option(0, "--workers", min=0, help="Simulator processes (0 = one per CPU core)."),
     friction_scale: float = typer.Option(
-        None, "--friction-scale", help="Also re-simulate the unrounded curve at this friction (e.g. 1.05)."
+        None,
+        "--friction-scale",
+        min=0.01,
+        max=100.0,
+        help="Also re-simulate the unrounded curve at this friction (e.g. 1.05).",
     ),
 ) -> None:
     """Discretisation experiment (paper 5.1): share of transitions whose state changes when rounded."""
     from twisted.evaluate import PAPER_DISCRETISATION_CHANGED, EvalInputError, run_discretisation
 
+    check_workers(workers or None)
     workers = workers or _default_parallel()
     columns = (TextColumn("[bold]re-simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with open_db(ctx) as store, Progress(*columns, console=console) as bar:
@@ -457,6 +490,27 @@ def discretise_command(
     )
 
 
+def _output_file(option: str, path: Path, suffix: str) -> Path:
+    """The file a picture is written to: ``path``, with ``suffix`` added when it has none (exit 2 when it
+    has another, or its folder cannot be created or written)."""
+    if path.suffix.lower() != suffix:
+        if path.suffix:
+            fail(f"{option} {path}: the file must end in {suffix} (it is written as {suffix[1:].upper()})")
+        path = path.with_name(path.name + suffix)
+    if path.is_dir():
+        fail(f"{option} {path}: is a directory; give a file name ending in {suffix}")
+    folder = path.parent
+    while not folder.exists():  # save_png creates missing folders: the nearest existing one must allow it
+        folder = folder.parent
+    if not folder.is_dir():
+        fail(f"{option} {path}: {folder} is not a directory")
+    if not os.access(folder, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        fail(f"{option} {path}: cannot write there (no permission in {folder})")
+    if str(path.resolve()).startswith(("/proc/", "/sys/", "/dev/")):
+        fail(f"{option} {path}: not a place for pictures (a kernel file system); give another path")
+    return path
+
+
 @app.command("render")
 def render_command(
     ctx: typer.Context,
@@ -492,10 +546,29 @@ def render_command(
         fail("give exactly one of --config ID, --run ID or --goal P-DATA")
     if tightened and run is None:
         fail("--tightened draws a run: give --run ID")
+    if gif is not None and run is None:
+        fail("--gif goes with --run (a plan is drawn as a GIF)")
+    p_data = None
+    if goal is not None:
+        from twisted.moves import parse_state
+
+        try:
+            p_data = parse_state(goal, "--goal")
+        except PDataError as exc:
+            fail(str(exc))
+    default = f"config-{config}.png" if config is not None else f"run-{run}.png"
+    if run is not None and tightened:
+        default = f"run-{run}-tightened.png"
+    if goal is not None:
+        default = "goal.png"
+    png = _output_file("--out", out or Path(default), ".png")
+    gif_path = None
+    if run is not None and not tightened:
+        gif_path = _output_file("--gif", gif or png.with_suffix(".gif"), ".gif")
     with open_db(ctx) as store:
         try:
             if config is not None:
-                rendered = render_configuration(store, config, out or Path(f"config-{config}.png"), gl=gl)
+                rendered = render_configuration(store, config, png, gl=gl)
             elif run is not None and tightened:
                 from twisted.planner import PlanInputError, replay
                 from twisted.store.knots import tightenings
@@ -507,20 +580,16 @@ def render_command(
                         replay(store, run, tighten=True)
                     except PlanInputError as exc:
                         fail(str(exc))
-                rendered = render_tightened(store, run, out or Path(f"run-{run}-tightened.png"))
+                rendered = render_tightened(store, run, png)
             elif run is not None:
-                png = out or Path(f"run-{run}.png")
-                rendered = render_run(store, run, png, gif or png.with_suffix(".gif"), gl=gl)
+                rendered = render_run(store, run, png, gif_path, gl=gl)
             else:
-                from twisted.moves import parse_state
-
-                try:
-                    p_data = parse_state(goal, "--goal")
-                except PDataError as exc:
-                    fail(str(exc))
-                rendered = render_goal(store, p_data, out or Path("goal.png"))
+                assert p_data is not None
+                rendered = render_goal(store, p_data, png)
         except RenderError as exc:
             fail(str(exc))
+        except OSError as exc:  # the checks above cannot foresee everything (a full disk)
+            fail(f"cannot write {exc.filename or png}: {exc.strerror}")
     for path in rendered.files:
         console.print(f"wrote {path}")
     console.print(f"drawn with: {rendered.backend}")

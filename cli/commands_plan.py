@@ -9,46 +9,40 @@ by Ctrl-C / SIGTERM after saving a checkpoint (continue with ``--resume RUN_ID``
 
 from __future__ import annotations
 
+import contextlib
 import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, console, err_console, fail, open_db
+from cli.app import (
+    EXIT_NOT_REACHED,
+    EXIT_OK,
+    app,
+    check_workers,
+    console,
+    err_console,
+    fail,
+    open_db,
+    seed_option,
+)
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
     return {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
 
 
-def _options(
-    *,
-    planner: str | None,
-    heuristic: str | None,
-    seed: int | None,
-    k: int | None,
-    p_expand: float | None,
-    k_expand: int | None,
-    plan_limit: int | None,
-    tighten: bool | None = None,
-    base: dict[str, Any] | None = None,
-) -> Any:
-    """PlannerOptions from the command line, over the stored ones of a resumed run (which must agree)."""
+def _options(asked: dict[str, Any], base: dict[str, Any] | None = None) -> Any:
+    """PlannerOptions from the command line (None: not given), over the stored ones of a resumed run
+    (which must agree)."""
     from twisted.planner import PlannerOptions
 
-    given: dict[str, Any] = {
-        "planner": planner,
-        "heuristic": heuristic,
-        "seed": seed,
-        "k": k,
-        "p_expand": p_expand,
-        "k_expand": k_expand,
-        "plan_limit": plan_limit,
-        "tighten": tighten,
-    }
-    given = {name: value for name, value in given.items() if value is not None}
+    given = {name: value for name, value in asked.items() if value is not None}
     if base is not None:
         stored = PlannerOptions.from_dict(base).to_dict()
         clash = [
@@ -92,15 +86,21 @@ def plan_command(
         "--planner",
         help="twisted (default, inverse model) | sac (SAC+HER policy) | random-low | low-level-only.",
     ),
-    workers: int = typer.Option(2, "--workers", min=1, help="Simulator processes (1: in this process)."),
-    seed: int | None = typer.Option(None, "--seed", help="Seed of the search (default 0)."),
-    k: int | None = typer.Option(None, "--k", min=1, help="Curves sampled per plan step (default 6)."),
+    workers: int = typer.Option(
+        2, "--workers", help="Simulator processes (1: in this process; at most 4 per CPU core)."
+    ),
+    seed: int | None = seed_option(None, "Seed of the search (default 0)."),
+    k: int | None = typer.Option(
+        None, "--k", min=1, max=1000, help="Curves sampled per plan step (default 6)."
+    ),
     p_expand: float | None = typer.Option(
         None, "--p-expand", min=0.0, max=1.0, help="RandomExpand probability after a failed iteration (0.05)."
     ),
-    k_expand: int | None = typer.Option(None, "--k-expand", min=1, help="Curves per RandomExpand (100)."),
+    k_expand: int | None = typer.Option(
+        None, "--k-expand", min=1, max=100_000, help="Curves per RandomExpand (100)."
+    ),
     plan_limit: int | None = typer.Option(
-        None, "--plan-limit", min=1, help="High-level plans kept per reached state (100)."
+        None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
     model_id: int | None = typer.Option(
         None,
@@ -134,84 +134,80 @@ def plan_command(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
 ) -> None:
-    """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database."""
-    from twisted.planner import (
-        PlanInputError,
-        StopSignals,
-        curve_sampler,
-        make_goal,
-        resume_search,
-        start_search,
-    )
-    from twisted.sim.pool import SimPool
-    from twisted.store.search import find_resumable_run, load_run
+    """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database.
 
-    goal_p = None
-    if goal is not None or knot is not None or crossings is not None:
-        try:
-            goal_p = make_goal(goal, knot, crossings)
-        except PlanInputError as exc:
-            fail(f"{'--knot' if knot is not None else '--goal'}: {exc}")
-    elif not resume:
-        fail(
-            "a goal is required: --goal P-DATA (e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]') "
-            "or --knot NAME (e.g. overhand)"
-        )
-    store = open_db(ctx)
+    The set-up (enumerating a knot's states, loading the model, starting the workers) counts toward
+    --timeout and stops at Ctrl-C like the search does.
+    """
+    from twisted.planner import StopRequested, StopSignals
 
-    run_id: int | None = None
-    parameters: dict[str, Any] | None = None
+    check_workers(workers)
     if resume_run_id is not None and not resume:
         fail(f"a run id is only taken with --resume: `twisted plan --resume {resume_run_id}`")
-    if resume:
-        run_id = resume_run_id if resume_run_id is not None else find_resumable_run(store, goal_p)
-        if run_id is None:
-            fail("--resume: no unfinished planner run" + (f" for goal {goal_p.spec}" if goal_p else ""))
-        info = load_run(store, run_id, with_nodes=False)
-        if info is None:
-            fail(f"--resume {run_id}: there is no planner run {run_id} in this database")
-        if goal_p is not None and info.goal.spec != goal_p.spec:
-            fail(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal_p.spec}")
-        if start_config is not None:
-            fail("--start-config cannot change the start of a resumed run")
-        parameters = info.parameters
-        if model_id is not None and parameters.get("model_id") not in (None, model_id):
-            fail(f"--model {model_id}: run {run_id} was searched with model {parameters.get('model_id')}")
-        model_id = parameters.get("model_id", model_id)
-
-    options = _options(
-        planner=planner,
-        heuristic=heuristic,
-        seed=seed,
-        k=k,
-        p_expand=p_expand,
-        k_expand=k_expand,
-        plan_limit=plan_limit,
-        tighten=True if tighten else None,
-        base=parameters,
-    )
-    try:
-        sampler, used_model_id = curve_sampler(store, options.planner, model_id)
-    except PlanInputError as exc:
-        fail(str(exc))
-
-    stop = StopSignals()
-    columns = (
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed:>6.0f}/{task.total:.0f} s"),
-        TextColumn("it {task.fields[iteration]}  sims {task.fields[sims]}  nodes {task.fields[nodes]}"),
-        TextColumn("states {task.fields[states]}  max cross {task.fields[max_cross]}"),
-        TimeElapsedColumn(),
-    )
-    with (
-        Progress(*columns, console=err_console, transient=True, disable=as_json) as bar,
-        SimPool(workers) as pool,
-        stop.installed(),
-    ):
-        task = bar.add_task(
-            "plan", total=max(timeout_s, 1e-9), iteration=0, sims=0, nodes=1, states=1, max_cross=0
+    if goal is None and knot is None and crossings is None and not resume:
+        fail(
+            "a goal is required: --goal P-DATA (e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]') or --knot "
+            "NAME (e.g. overhand); or continue a stopped run with --resume [RUN_ID]"
         )
+    request = _Request(
+        goal=goal,
+        knot=knot,
+        crossings=crossings,
+        resume=resume,
+        run_id=resume_run_id,
+        start_config=start_config,
+        model_id=model_id,
+        workers=workers,
+        search_options={
+            "planner": planner,
+            "heuristic": heuristic,
+            "seed": seed,
+            "k": k,
+            "p_expand": p_expand,
+            "k_expand": k_expand,
+            "plan_limit": plan_limit,
+            "tighten": True if tighten else None,
+        },
+    )
+    started = time.perf_counter()
+    stop = StopSignals()
+    with stop.installed(), contextlib.ExitStack() as resources:
+        bar = resources.enter_context(
+            Progress(*_COLUMNS, console=err_console, transient=True, disable=as_json)
+        )
+        task = bar.add_task(
+            "set-up", total=max(timeout_s, 1e-9), iteration=0, sims=0, nodes=1, states=1, max_cross=0
+        )
+        phase = ["checking the goal"]
+
+        def setup_step(what: str) -> None:
+            phase[0] = what
+            spent = time.perf_counter() - started
+            bar.update(task, description=f"set-up: {what}", completed=min(spent, timeout_s))
+
+        try:
+            with stop.setup(timeout_s):
+                setup = _set_up(ctx, request, resources, stop, setup_step)
+        except StopRequested:
+            bar.stop()
+            spent = time.perf_counter() - started
+            unchanged = f": run {resume_run_id} is unchanged" if resume_run_id is not None else ""
+            if stop.signum is None and stop.timed_out:
+                fail(
+                    f"--timeout {timeout_s:g} s ran out during the set-up ({phase[0]}, after {spent:.1f} s); "
+                    f"nothing was searched{unchanged}",
+                    EXIT_NOT_REACHED,
+                )
+            err_console.print(
+                f"interrupted during the set-up ({phase[0]}, after {spent:.1f} s); "
+                f"nothing was searched{unchanged}",
+                highlight=False,
+            )
+            raise typer.Exit(stop.exit_code) from None
+        search = _begin(setup, stop)
+        setup_s = time.perf_counter() - started
+        search.add_setup_time(setup_s)
+        search.checkpoint_every_s = checkpoint_every_s
 
         def progress(search: Any) -> None:
             bar.update(
@@ -224,29 +220,11 @@ def plan_command(
                 max_cross=max(p.cross for p in search.tree.states.values()),
             )
 
-        try:
-            if run_id is not None:
-                search = resume_search(store, run_id, pool, sampler, stop=stop, progress=progress)
-            else:
-                assert goal_p is not None
-                search = start_search(
-                    store,
-                    goal_p,
-                    options,
-                    pool,
-                    sampler,
-                    start_configuration_id=start_config,
-                    stop=stop,
-                    progress=progress,
-                    extra_parameters={"model_id": used_model_id},
-                )
-        except PlanInputError as exc:
-            fail(str(exc))
-        search.checkpoint_every_s = checkpoint_every_s
+        search.progress = progress
         bar.update(task, description=f"run {search.run_id}")
         result = search.run(timeout_s=timeout_s, max_iterations=max_iterations)
 
-    _print_result(search, result, as_json)
+    _print_result(search, result, as_json, setup_s)
     if result.solved:
         raise typer.Exit(EXIT_OK)
     if result.status == "interrupted":
@@ -258,7 +236,134 @@ def plan_command(
     raise typer.Exit(EXIT_NOT_REACHED)
 
 
-def _print_result(search: Any, result: Any, as_json: bool) -> None:
+_COLUMNS = (
+    TextColumn("[bold]{task.description}"),
+    BarColumn(),
+    TextColumn("{task.completed:>6.0f}/{task.total:.0f} s"),
+    TextColumn("it {task.fields[iteration]}  sims {task.fields[sims]}  nodes {task.fields[nodes]}"),
+    TextColumn("states {task.fields[states]}  max cross {task.fields[max_cross]}"),
+    TimeElapsedColumn(),
+)
+
+
+@dataclass
+class _Request:
+    """What `twisted plan` was asked for (the command line, before anything is checked or opened)."""
+
+    goal: str | None
+    knot: str | None
+    crossings: int | None
+    resume: bool
+    run_id: int | None
+    start_config: int | None
+    model_id: int | None
+    workers: int
+    search_options: dict[str, Any]
+
+
+@dataclass
+class _Setup:
+    """What the set-up prepared: the store, the goal or the run to continue, the model, the workers."""
+
+    store: Any
+    goal: Any | None
+    run_id: int | None
+    start_config: int | None
+    options: Any
+    sampler: Any
+    model_id: int | None
+    pool: Any
+
+
+def _set_up(
+    ctx: typer.Context,
+    request: _Request,
+    resources: contextlib.ExitStack,
+    stop: Any,
+    step: Callable[[str], None],
+) -> _Setup:
+    """Check the inputs (exit 2 before anything is written), open the store, load the model, start workers.
+
+    Enumerating a knot's states and starting the workers stop at once at a signal or the deadline; the
+    checks in between (database, run, model) finish first, so that a bad input is reported as such.
+    """
+    from twisted.planner import PlanInputError, curve_sampler, make_goal
+    from twisted.sim.pool import SimPool
+
+    goal_p = None
+    if request.goal is not None or request.knot is not None or request.crossings is not None:
+        step("enumerating the knot's states" if request.knot is not None else "checking the goal")
+        try:
+            goal_p = make_goal(request.goal, request.knot, request.crossings)
+        except PlanInputError as exc:
+            fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
+    if not request.resume:
+        _options(request.search_options)  # exit 2 here, before the store is opened
+    step("opening the database")
+    with stop.deferred():
+        store = resources.enter_context(open_db(ctx))
+        run_id, options, model_id = _run_to_continue(store, request, goal_p)
+        step("loading the model")
+        try:
+            sampler, used_model_id = curve_sampler(store, options.planner, model_id)
+        except PlanInputError as exc:
+            fail(str(exc))
+    step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
+    pool = resources.enter_context(SimPool(request.workers))
+    return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool)
+
+
+def _run_to_continue(store: Any, request: _Request, goal_p: Any) -> tuple[int | None, Any, int | None]:
+    """With --resume: the run, its options and model (exit 2 when it cannot be continued); else the new
+    run's options and the model asked for."""
+    from twisted.store.search import find_resumable_run, load_run
+
+    if not request.resume:
+        return None, _options(request.search_options), request.model_id
+    run_id = request.run_id if request.run_id is not None else find_resumable_run(store, goal_p)
+    if run_id is None:
+        fail("--resume: no unfinished planner run" + (f" for goal {goal_p.spec}" if goal_p else ""))
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        fail(f"--resume {run_id}: there is no planner run {run_id} in this database")
+    if goal_p is not None and info.goal.spec != goal_p.spec:
+        fail(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal_p.spec}")
+    if request.start_config is not None:
+        fail("--start-config cannot change the start of a resumed run")
+    if info.outcome == "solved":
+        fail(f"--resume {run_id}: run {run_id} already solved its goal (see `twisted replay {run_id}`)")
+    if info.holder is not None:
+        fail(f"--resume {run_id}: run {run_id} is still being searched by {info.holder}; stop it first")
+    parameters = info.parameters
+    model_id = request.model_id
+    if model_id is not None and parameters.get("model_id") not in (None, model_id):
+        fail(f"--model {model_id}: run {run_id} was searched with model {parameters.get('model_id')}")
+    return run_id, _options(request.search_options, base=parameters), parameters.get("model_id", model_id)
+
+
+def _begin(setup: _Setup, stop: Any) -> Any:
+    """The search of a set-up: run ``setup.run_id`` continued (its lease taken) or a new run."""
+    from twisted.planner import PlanInputError, resume_search, start_search
+
+    try:
+        if setup.run_id is not None:
+            return resume_search(setup.store, setup.run_id, setup.pool, setup.sampler, stop=stop)
+        assert setup.goal is not None
+        return start_search(
+            setup.store,
+            setup.goal,
+            setup.options,
+            setup.pool,
+            setup.sampler,
+            start_configuration_id=setup.start_config,
+            stop=stop,
+            extra_parameters={"model_id": setup.model_id},
+        )
+    except PlanInputError as exc:
+        fail(str(exc))
+
+
+def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0) -> None:
     steps = [
         {"step": i, **_curve_row(node.curve), "cross": node.p_data.cross, "state": node.p_data.to_list()}
         for i, node in enumerate(result.path[1:], start=1)
@@ -273,6 +378,7 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
             "outcome": result.status,
             "solved": result.solved,
             "search_time_s": round(result.elapsed_s, 3),
+            "setup_s": round(setup_s, 3),
             "sim_calls": result.sim_calls,
             "iterations": result.iterations,
             "nodes": result.nodes,
@@ -288,7 +394,8 @@ def _print_result(search: Any, result: Any, as_json: bool) -> None:
         f"run {result.run_id}: {outcome}"
         f"  goal {search.goal.label}"
         + (f" reached {result.path[-1].p_data.key}" if result.path and search.goal.knot else "")
-        + f"  search time {result.elapsed_s:.1f} s  simulator calls {result.sim_calls}"
+        + f"  search time {result.elapsed_s:.1f} s (set-up {setup_s:.1f} s)"
+        f"  simulator calls {result.sim_calls}"
         f"  iterations {result.iterations}  nodes {result.nodes}  states {result.states}"
         + (f"  pull tests {search.pull_tests}" if search.options.tighten else ""),
         highlight=False,

@@ -8,7 +8,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option
 
 rl_app = typer.Typer(
     no_args_is_help=True,
@@ -38,7 +38,7 @@ def _goal_crossings(text: str) -> tuple[int, ...]:
 def train_command(
     ctx: typer.Context,
     steps: int = typer.Option(20_000, "--steps", min=1, help="Environment steps (curves) in all."),
-    seed: int = typer.Option(0, "--seed", help="Seed of goals, exploration and weights."),
+    seed: int = seed_option(0, "Seed of goals, exploration and weights."),
     goal: Annotated[
         list[str] | None,
         typer.Option(
@@ -51,12 +51,16 @@ def train_command(
         None, "--knot-crossings", min=1, help="Crossings of --knot states."
     ),
     goal_crossings: str = typer.Option("1,2,3", "--goal-crossings", help="Crossing counts of default goals."),
-    max_curves: int = typer.Option(10, "--max-curves", min=1, help="Curves per episode (truncation)."),
-    friction_scale: float = typer.Option(1.0, "--friction-scale", min=0.01, help="Rope friction x this."),
+    max_curves: int = typer.Option(
+        10, "--max-curves", min=1, max=10_000, help="Curves per episode (truncation)."
+    ),
+    friction_scale: float = typer.Option(
+        1.0, "--friction-scale", min=0.01, max=100.0, help="Rope friction x this."
+    ),
     learning_starts: int = typer.Option(
         500, "--learning-starts", min=0, help="Random steps before learning."
     ),
-    batch_size: int = typer.Option(256, "--batch-size", min=1),
+    batch_size: int = typer.Option(256, "--batch-size", min=1, max=1_000_000),
     log_every: int = typer.Option(500, "--log-every", min=1, help="Steps between success rows."),
     checkpoint_every: int = typer.Option(
         2_000, "--checkpoint-every", min=1, help="Steps between checkpoints."
@@ -69,7 +73,7 @@ def train_command(
     ),
     resume: int | None = typer.Option(None, "--resume", help="Continue this interrupted run (its settings)."),
     threads: int = typer.Option(
-        1, "--threads", min=1, help="torch CPU threads (1 is best on a busy machine)."
+        1, "--threads", min=1, max=1024, help="torch CPU threads (1 is best on a busy machine)."
     ),
 ) -> None:
     """Train a SAC+HER policy; checkpoints (policies for `twisted plan --planner sac`) go to the database."""

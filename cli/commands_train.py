@@ -10,7 +10,9 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option
+
+EXIT_FAILED = 1
 
 
 def _fmt(value: Any, spec: str = ".3f") -> str:
@@ -26,13 +28,15 @@ def train_command(
     ),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     resume: bool = typer.Option(False, "--resume", help="Continue the newest unfinished training run."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the split, batch order, augmentation and weights."),
-    batch_size: int = typer.Option(256, "--batch-size", min=1),
+    seed: int = seed_option(0, "Seed of the split, batch order, augmentation and weights."),
+    batch_size: int = typer.Option(256, "--batch-size", min=1, max=1_000_000),
     lr: float = typer.Option(1e-3, "--lr", min=0.0, help="Adam learning rate."),
     weight_decay: float = typer.Option(0.0, "--weight-decay", min=0.0, help="AdamW weight decay (0: Adam)."),
-    hidden: int = typer.Option(256, "--hidden", min=8, help="Width of the shared trunk."),
-    layers: int = typer.Option(3, "--layers", min=1, help="Layers of the shared trunk."),
-    components: int = typer.Option(4, "--components", min=1, help="Gaussians per continuous head."),
+    hidden: int = typer.Option(256, "--hidden", min=8, max=8192, help="Width of the shared trunk."),
+    layers: int = typer.Option(3, "--layers", min=1, max=64, help="Layers of the shared trunk."),
+    components: int = typer.Option(
+        4, "--components", min=1, max=256, help="Gaussians per continuous head."
+    ),
     link_head: str = typer.Option(
         "pointer", "--link-head", help="pointer (shared per-link scorer) or dense."
     ),
@@ -45,6 +49,7 @@ def train_command(
         None,
         "--threads",
         min=1,
+        max=1024,
         help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
     ),
     checkpoint_every_s: float = typer.Option(
@@ -58,6 +63,7 @@ def train_command(
     from twisted.model.network import NetConfig
     from twisted.model.train import Progress as TrainProgress
     from twisted.model.train import TrainConfig, train
+    from twisted.store.training import NonFiniteModelError, mark_training_failed
 
     if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
         fail(f"--device must be cpu or cuda, got {device!r}")
@@ -116,11 +122,17 @@ def train_command(
             )
         except NoTrainingDataError as exc:
             fail(str(exc), EXIT_BAD_INPUT)
+        except NonFiniteModelError as exc:
+            if exc.training_run_id is not None:
+                mark_training_failed(store, exc.training_run_id, str(exc))
+            fail(str(exc), EXIT_FAILED)
         except ValueError as exc:
             fail(str(exc), EXIT_BAD_INPUT)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (cli.interrupt)
+            from cli import interrupt
+
             console.print("interrupted: checkpoint saved; continue with `twisted train --resume`")
-            raise typer.Exit(130) from None
+            raise typer.Exit(interrupt.exit_code(exc) or 130) from None
     m = outcome.metrics
     if outcome.status != "finished":
         console.print(

@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+import sys
 
 import cli
-from cli.app import app
+from cli import interrupt
+
+interrupt.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
 
 
 def load_commands() -> None:
@@ -18,7 +21,16 @@ def load_commands() -> None:
             importlib.import_module(f"cli.{module.name}")
 
 
-load_commands()
+try:
+    from cli.app import app
+
+    load_commands()
+except BaseException as exc:  # a signal during the imports (they may wrap it, e.g. in ImportError)
+    code = interrupt.exit_code(exc)
+    if code is None:
+        raise
+    print(f"interrupted (exit {code}) while starting", file=sys.stderr)
+    sys.exit(code)
 
 
 def run() -> None:

@@ -78,6 +78,7 @@ if TYPE_CHECKING:  # twisted.sim (MuJoCo) is imported where the simulation runs
 
 RUN_KIND = "collect"
 MAX_ENCODED_CROSS = 6  # the inverse model encodes goals of up to 6 crossings
+MAX_HOURS = 1e5  # more is a typo (and overflows the clock arithmetic near 1e308)
 
 
 class CollectError(ValueError):
@@ -110,11 +111,15 @@ class CollectOptions:
                 raise CollectError(f"--{name.replace('_', '-')} must be a positive number, got {value!r}")
 
         positive("hours", self.hours)
+        if self.hours > MAX_HOURS:
+            raise CollectError(f"--hours must be at most {MAX_HOURS:g} (about 11 years), got {self.hours!r}")
         positive("workers", self.workers)
         positive("batch_size", self.batch_size)
         positive("batch_seconds", self.batch_seconds)
         positive("refresh_seconds", self.refresh_seconds)
         positive("friction_scale", self.friction_scale)
+        if self.friction_scale > 100:
+            raise CollectError(f"--friction-scale must be at most 100, got {self.friction_scale!r}")
         if not (math.isfinite(self.cross_bias) and 0 <= self.cross_bias <= 10):
             raise CollectError(f"--cross-bias must be between 0 and 10, got {self.cross_bias!r}")
         positive("max_kept", self.max_kept, allow_none=True)
@@ -161,6 +166,7 @@ class CollectSummary:
     message: str | None = None
     kept_by_to_cross: dict[int, int] = field(default_factory=dict)
     commit_seconds: float = 0.0  # the writer's time spent committing batches
+    signum: int | None = None  # the signal that stopped it (interrupted)
 
     @property
     def kept_per_hour(self) -> float:
@@ -241,15 +247,62 @@ class _WorkerSpec:
     deadline: float  # time.time() at which to stop
 
 
-def _worker_main(spec: _WorkerSpec, out: Any, stop: Event) -> None:
-    """Simulate curves from D_Q and send batches to the writer until the deadline or ``stop``."""
+class Budget:
+    """``max_tries`` / ``max_kept`` shared by every worker, so that a run stops at exactly those numbers.
+
+    A worker claims a try before it simulates a curve, and a kept slot before it keeps a transition; a
+    curve whose transition finds no slot left is dropped as if never tried (the run ended before it).
+    """
+
+    def __init__(self, ctx: Any, max_tries: int | None, max_kept: int | None) -> None:
+        self.max_tries, self.max_kept = max_tries, max_kept
+        self.tries = ctx.Value("q", 0)
+        self.kept = ctx.Value("q", 0)
+
+    def claim_try(self) -> bool:
+        with self.tries.get_lock():
+            if self.max_tries is not None and self.tries.value >= self.max_tries:
+                return False
+            self.tries.value += 1
+            return True
+
+    def claim_kept(self) -> bool:
+        """A kept slot; without one the try claimed for this curve is given back."""
+        with self.kept.get_lock():
+            if self.max_kept is None or self.kept.value < self.max_kept:
+                self.kept.value += 1
+                return True
+        with self.tries.get_lock():
+            self.tries.value -= 1
+        return False
+
+
+@contextmanager
+def signals_blocked() -> Iterator[None]:
+    """SIGINT and SIGTERM held back (delivered at the end) while worker processes are started.
+
+    A child inherits the mask, so a Ctrl-C to the process group cannot kill a worker that has not yet
+    set its own handlers (it used to fail the run: "worker died (exit code -2)"); the worker unblocks
+    them once it has. The main process gets its signals as soon as the block ends.
+    """
+    blocked = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, blocked)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _worker_main(spec: _WorkerSpec, out: Any, stop: Event, budget: Budget) -> None:
+    """Simulate curves from D_Q and send batches to the writer until the deadline, ``stop`` or the budget."""
     # Ctrl-C reaches the whole process group: only the main process reacts (it sets ``stop``).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     terminated = []
     signal.signal(signal.SIGTERM, lambda *_: terminated.append(True))
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})  # see signals_blocked
     parent = multiprocessing.parent_process()
     try:
-        _worker_loop(spec, out, stop, terminated, parent)
+        _worker_loop(spec, out, stop, terminated, parent, budget)
         out.put(("done", spec.worker, None))
     except BaseException:  # noqa: BLE001 - reported to the writer, which fails the run
         out.put(("error", spec.worker, traceback.format_exc()))
@@ -320,7 +373,9 @@ def record_curve(
         )
 
 
-def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool], parent: Any) -> None:
+def _worker_loop(
+    spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool], parent: Any, budget: Budget
+) -> None:
     from twisted.sim import RopeSim, sample_curve
 
     options = spec.options
@@ -367,6 +422,8 @@ def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool
         while not stop.is_set() and not terminated and time.time() < spec.deadline:
             if parent is not None and not parent.is_alive():
                 return  # the writer is gone (killed): nothing can be committed any more
+            if not budget.claim_try():
+                break
             config_id = dq.sample(rng)
             q, state_id, cross = load(config_id)
             curve = sample_curve(rng)
@@ -375,6 +432,8 @@ def _worker_loop(spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool
             outcome = sim.apply(curve)
             p_data = sim.p_data() if outcome.ok else None
             sim_seconds += time.perf_counter() - started
+            if p_data is not None and cross < p_data.cross <= options.max_cross and not budget.claim_kept():
+                break  # the run has its max_kept transitions: this curve is not part of it
             record_curve(
                 tries, kept, sim, config_id, state_id, cross, curve, p_data, options.max_cross, outcome.steps
             )
@@ -426,43 +485,50 @@ def collect(
     """
     options.validate()
     seed = options.seed if options.seed is not None else secrets.randbits(63)
-    with store.session(write=True) as session:
-        mark_stale_runs(session, RUN_KIND)
-        parameters = asdict(options) | {
-            "seed": seed,
-            "dq_sampling": "P(c) ~ (1+c)**cross_bias, uniform within c",
-        }
-        run_id = start_run(session, RUN_KIND, parameters, seed=seed).id
-    started = time.monotonic()
-    total_s = options.hours * 3600.0
-    progress = CollectProgress(run_id=run_id, elapsed_s=0.0, total_s=total_s, workers=options.workers)
-    status, message = "finished", None
     signals: list[int] = []
-    sim_seconds = commit_seconds = 0.0
-    kept_by_to_cross: dict[int, int] = {}
+    finishing = False
     ctx = multiprocessing.get_context("spawn")
-    out = ctx.Queue()
     stop = ctx.Event()
-    processes: list[Any] = []
-    url = store.url.render_as_string(hide_password=False)
 
     def on_signal(signum: int) -> None:
         signals.append(signum)
         stop.set()
-        if len(signals) > 1:
+        if len(signals) > 1 and not finishing:
             raise KeyboardInterrupt  # a second signal: stop now, without waiting for the workers
 
-    try:
-        with stop_on_signals(on_signal):
+    # handled from before the run exists to after it is ended, so no signal can leave it 'running'
+    with stop_on_signals(on_signal):
+        with store.session(write=True) as session:
+            mark_stale_runs(session, RUN_KIND)
+            parameters = asdict(options) | {
+                "seed": seed,
+                "dq_sampling": "P(c) ~ (1+c)**cross_bias, uniform within c",
+            }
+            run_id = start_run(session, RUN_KIND, parameters, seed=seed).id
+        started = time.monotonic()
+        total_s = options.hours * 3600.0
+        progress = CollectProgress(run_id=run_id, elapsed_s=0.0, total_s=total_s, workers=options.workers)
+        status, message = "finished", None
+        sim_seconds = commit_seconds = 0.0
+        kept_by_to_cross: dict[int, int] = {}
+        out = ctx.Queue()
+        budget = Budget(ctx, options.max_tries, options.max_kept)
+        processes: list[Any] = []
+        url = store.url.render_as_string(hide_password=False)
+
+        try:
             ensure_root(store, run_id, options.friction_scale)
             deadline = time.time() + total_s
             seeds = np.random.SeedSequence([seed, run_id]).spawn(options.workers)
-            for worker in range(options.workers):
-                spec = _WorkerSpec(worker, url, run_id, seeds[worker], options, deadline)
-                process = ctx.Process(target=_worker_main, args=(spec, out, stop), name=f"collect-{worker}")
-                process.start()
-                processes.append(process)
-            running = set(range(options.workers))
+            with signals_blocked():
+                for worker in range(options.workers if not stop.is_set() else 0):
+                    spec = _WorkerSpec(worker, url, run_id, seeds[worker], options, deadline)
+                    process = ctx.Process(
+                        target=_worker_main, args=(spec, out, stop, budget), name=f"collect-{worker}"
+                    )
+                    process.start()
+                    processes.append(process)
+            running = set(range(len(processes)))
             last_report = 0.0
             while running:
                 try:
@@ -505,25 +571,26 @@ def collect(
                 if on_progress is not None and (progress.elapsed_s - last_report >= 0.2 or not running):
                     on_progress(progress)
                     last_report = progress.elapsed_s
-    except KeyboardInterrupt:
-        status, message = "interrupted", "stopped at once by a second signal (uncommitted batches lost)"
-    except BaseException as exc:
-        status, message = "failed", f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        stop.set()
-        for process in processes:
-            process.join(timeout=10)
-            if process.is_alive():
-                process.terminate()
-                process.join(timeout=5)
-        out.cancel_join_thread()
-        if signals and status == "finished":
-            status = "interrupted"
-            message = f"stopped by {signal.Signals(signals[0]).name}"
-        wall_seconds = time.monotonic() - started
-        with store.session(write=True) as session:
-            end_run(session, run_id, status, message, wall_seconds=wall_seconds)
+        except KeyboardInterrupt:
+            status, message = "interrupted", "stopped at once by a second signal (uncommitted batches lost)"
+        except BaseException as exc:
+            status, message = "failed", f"{type(exc).__name__}: {exc}"
+            raise
+        finally:
+            finishing = True  # a further signal no longer cuts the clean-up short
+            stop.set()
+            for process in processes:
+                process.join(timeout=10)
+                if process.is_alive():
+                    process.terminate()
+                    process.join(timeout=5)
+            out.cancel_join_thread()
+            if signals and status == "finished":
+                status = "interrupted"
+                message = f"stopped by {signal.Signals(signals[0]).name}"
+            wall_seconds = time.monotonic() - started
+            with store.session(write=True) as session:
+                end_run(session, run_id, status, message, wall_seconds=wall_seconds)
     return CollectSummary(
         run_id=run_id,
         status=status,
@@ -538,6 +605,7 @@ def collect(
         message=message,
         kept_by_to_cross=dict(sorted(kept_by_to_cross.items())),
         commit_seconds=commit_seconds,
+        signum=signals[0] if signals else None,
     )
 
 

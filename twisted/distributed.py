@@ -480,7 +480,9 @@ def _collect(
         wall_seconds = time.monotonic() - started
         with store.session(write=True) as session:
             end_run(session, run_id, status, message, wall_seconds=wall_seconds)
-    return _summary_from_store(store, run_id, status, seed, options.workers, message, commit_seconds)
+    summary = _summary_from_store(store, run_id, status, seed, options.workers, message, commit_seconds)
+    summary.signum = signals[0] if signals else None
+    return summary
 
 
 def _summary_from_store(

@@ -291,6 +291,9 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
         raise EvalInputError(
             f"goal file is not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
         ) from None
+    except RecursionError:
+        message = "goal file nests lists or objects far too deeply (a goal is a list of lists)"
+        raise EvalInputError(message) from None
     if isinstance(data, list):
         if not name:
             raise EvalInputError("a goal file holding one list needs a set name (--name)")
@@ -305,7 +308,8 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
     out: dict[str, list[Goal]] = {}
     for set_name, goals in named.items():
         if not set_name or len(set_name) > 64:
-            raise EvalInputError(f"set name {set_name!r} must have 1 to 64 characters")
+            shown = set_name if len(set_name) <= 80 else f"{set_name[:80]}... ({len(set_name):,} characters)"
+            raise EvalInputError(f"set name {shown!r} must have 1 to 64 characters")
         if not isinstance(goals, list) or not goals:
             raise EvalInputError(f"set {set_name!r}: expected a non-empty list of goals (P-data or knots)")
         seen: dict[str, int] = {}

@@ -173,8 +173,9 @@ def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
         written = text if text.startswith(KNOT_PREFIX) else KNOT_PREFIX + text
         match = _KNOT_SPEC.match(written) or _KNOT_SPEC.match(written + "@0")
         if match is None:
+            shown = spec if len(spec) <= 80 else f"{spec[:80]}... ({len(spec):,} characters)"
             raise GoalError(
-                f"goal {spec!r} is neither P-data nor a knot: write a knot as <name>, <name>@<crossings> "
+                f"goal {shown!r} is neither P-data nor a knot: write a knot as <name>, <name>@<crossings> "
                 "or knot:<name>@<crossings>, e.g. overhand@3"
             )
         crossings = int(match["crossings"])

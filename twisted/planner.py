@@ -67,6 +67,7 @@ __all__ = [
     "curve_sampler",
     "make_goal",
     "high_level",
+    "not_finite",
     "replay",
     "resume_search",
     "start_search",
@@ -272,7 +273,10 @@ class _Stop(Exception):
 
 
 class StopRequested(BaseException):
-    """Raised by :class:`StopSignals` inside a blocking wait on the worker pool (never elsewhere)."""
+    """Raised by :class:`StopSignals` inside a blocking wait on the worker pool or during the set-up."""
+
+
+_MAX_TIMER_S = 1e8  # a longer set-up budget is no budget (setitimer overflows near 1e308)
 
 
 class StopSignals:
@@ -286,6 +290,7 @@ class StopSignals:
 
     def __init__(self) -> None:
         self.signum: int | None = None
+        self.timed_out = False  # the time budget of a set-up section ran out
         self._waiting = False
 
     def __call__(self) -> bool:
@@ -306,6 +311,55 @@ class StopSignals:
             yield
         finally:
             self._waiting = False
+
+    @contextlib.contextmanager
+    def setup(self, budget_s: float | None = None) -> Iterator[None]:
+        """The set-up before a search (goal enumeration, imports, loading the model, starting workers).
+
+        Nothing in it can be checkpointed, so a stop signal, or ``budget_s`` seconds passing (the
+        set-up counts toward the search's timeout), ends it at once with :class:`StopRequested`; then
+        :attr:`signum` or :attr:`timed_out` says which. An error that a signal caused inside code that
+        wraps it (an import turns KeyboardInterrupt into ImportError) is reported as StopRequested too.
+        """
+        armed = budget_s is not None and budget_s < _MAX_TIMER_S
+        previous = signal.signal(signal.SIGALRM, self._alarm) if armed else None
+        if armed:
+            assert budget_s is not None
+            signal.setitimer(signal.ITIMER_REAL, max(budget_s, 1e-3))
+        self._waiting = True
+        try:
+            if self.signum is not None:
+                raise StopRequested
+            yield
+        except StopRequested:
+            raise
+        except BaseException as exc:
+            if self.signum is not None or self.timed_out:
+                raise StopRequested from exc
+            raise
+        finally:
+            self._waiting = False
+            if armed:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, previous)
+
+    @contextlib.contextmanager
+    def deferred(self) -> Iterator[None]:
+        """Inside :meth:`setup`, a section that a stop signal or the deadline does not cut short (checks of
+        the input, whose errors must win); they take effect when it ends."""
+        waiting, self._waiting = self._waiting, False
+        try:
+            yield
+        finally:
+            self._waiting = waiting
+        if waiting and (self.signum is not None or self.timed_out):
+            raise StopRequested
+
+    def _alarm(self, signum: int, frame: Any) -> None:
+        self.timed_out = True
+        if self._waiting:
+            self._waiting = False
+            raise StopRequested
 
     def _handler(self, signum: int, frame: Any) -> None:
         self.signum = signum
@@ -401,6 +455,15 @@ class Twisted:
         """Search time so far, over every run() and resumed process."""
         running_s = 0.0 if self._t0 is None else time.perf_counter() - self._t0
         return self.elapsed_before_s + running_s
+
+    def add_setup_time(self, seconds: float) -> None:
+        """Count ``seconds`` of set-up (loading, starting workers) as time spent on this run.
+
+        It then counts toward the timeout and is stored with the run's search time, like a resumed
+        run's earlier time.
+        """
+        self.elapsed_before_s += seconds
+        self._boundary.elapsed_s = self.elapsed_s
 
     def _checkpoint(self) -> Checkpoint:
         return Checkpoint(
@@ -768,7 +831,30 @@ def curve_sampler(
         model = load_model(store, model_id)
     except ModelError as exc:
         raise PlanInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
+    broken = not_finite(model)
+    if broken:
+        which = "the shipped model" if model.model_id is None else f"model {model.model_id}"
+        hint = "" if model_id is not None else " (the newest in the database)"
+        raise PlanInputError(
+            f"{which}{hint} cannot plan: {broken}; train a new one, or choose another with --model ID "
+            "(see `twisted models`)"
+        )
     return ModelCurves(model), model.model_id
+
+
+def not_finite(model: Any) -> str | None:
+    """What is not finite in an inverse model (weights, stored losses), in words; None when all is."""
+    import torch
+
+    for name, values in model.net.state_dict().items():
+        if torch.is_floating_point(values) and not bool(torch.isfinite(values).all()):
+            return f"its weights {name} hold NaN or infinity"
+    metrics = model.metadata.get("metrics", {}) or {}
+    for name in ("val_loss", "train_loss"):
+        value = metrics.get(name)
+        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+            return f"its {name.replace('_', ' ')} is {value}"
+    return None
 
 
 def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
@@ -888,17 +974,17 @@ def resume_search(
     progress: Callable[[Twisted], None] | None = None,
 ) -> Twisted:
     """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
-    from twisted.store.search import SearchRun, discard_after_checkpoint, load_run
+    from twisted.store.search import RunBusyError, SearchRun, discard_after_checkpoint, load_run, take_lease
 
     info = load_run(store, run_id, with_nodes=False)
     if info is None:
         raise PlanInputError(f"run {run_id} is not a planner run in this database")
-    if info.outcome == "solved":
-        raise PlanInputError(f"run {run_id} already solved its goal (see `twisted replay {run_id}`)")
     if info.checkpoint is None:
         raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
-    if info.live:
-        raise PlanInputError(f"run {run_id} is still being searched by process {info.pid}; stop it first")
+    try:
+        take_lease(store, run_id)  # from here on this process is the run's one writer
+    except (LookupError, RunBusyError) as exc:
+        raise PlanInputError(str(exc)) from None
     discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
     info = load_run(store, run_id)
     assert info is not None and info.checkpoint is not None
@@ -913,7 +999,6 @@ def resume_search(
     )
     node_ids = {node.index: node.db_id for node in tree.nodes if node.db_id is not None}
     recorder = SearchRun(store, run_id, node_ids)
-    recorder.resumed()
     return Twisted(
         info.goal,
         tree,

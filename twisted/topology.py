@@ -107,6 +107,15 @@ class PData:
 EMPTY = PData(())
 
 
+def _quote(value: Any, limit: int = 80) -> str:
+    """``repr(value)``, cut to about ``limit`` characters: error messages quote input, never all of it."""
+    try:
+        text = repr(value)
+    except RecursionError:
+        text = f"<a {type(value).__name__} nested too deeply to print>"
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text):,} characters)"
+
+
 def _validate(entries: Sequence[Any]) -> PData:
     if not isinstance(entries, (list, tuple)):
         raise PDataError(
@@ -116,16 +125,16 @@ def _validate(entries: Sequence[Any]) -> PData:
     for i, entry in enumerate(entries):
         if not isinstance(entry, (list, tuple)) or len(entry) != 4:
             raise PDataError(
-                f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {entry!r}"
+                f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {_quote(entry)}"
             )
         pos, over, partner, sign = entry
         for name, value in (("position", pos), ("partner", partner)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise PDataError(f"entry {i}: {name} must be an integer, got {value!r}")
+                raise PDataError(f"entry {i}: {name} must be an integer, got {_quote(value)}")
         if over not in ("O", "U"):
-            raise PDataError(f"entry {i}: over/under must be \"O\" or \"U\", got {over!r}")
+            raise PDataError(f"entry {i}: over/under must be \"O\" or \"U\", got {_quote(over)}")
         if sign not in ("+", "-"):
-            raise PDataError(f"entry {i}: sign must be \"+\" or \"-\", got {sign!r}")
+            raise PDataError(f"entry {i}: sign must be \"+\" or \"-\", got {_quote(sign)}")
         visits.append(Visit(int(pos), over, int(partner), sign))
     m = len(visits)
     if m % 2:
@@ -133,7 +142,7 @@ def _validate(entries: Sequence[Any]) -> PData:
     visits.sort()
     positions = [v.position for v in visits]
     if positions != list(range(1, m + 1)):
-        raise PDataError(f"positions must be exactly 1..{m} (each once), got {sorted(positions)}")
+        raise PDataError(f"positions must be exactly 1..{m} (each once), got {_quote(sorted(positions))}")
     for v in visits:
         if not 1 <= v.partner <= m:
             raise PDataError(f"position {v.position}: partner {v.partner} is outside 1..{m}")
@@ -163,8 +172,12 @@ def parse_p_data(value: str | Sequence[Any] | PData) -> PData:
             value = json.loads(value)
         except json.JSONDecodeError as exc:
             raise PDataError(
-                f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {value!r}"
+                f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {_quote(value)}"
             ) from None
+        except RecursionError:
+            # P-data nests two levels deep; the JSON decoder recurses once per "["
+            message = f"P-data nests lists far too deeply (it is a list of lists): {_quote(value)}"
+            raise PDataError(message) from None
     return _validate(value)  # type: ignore[arg-type]
 
 

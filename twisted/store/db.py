@@ -158,8 +158,28 @@ def _classify(tables: set[str], revisions: list[str] | None, where: str) -> list
     return revisions
 
 
-def _inspect_sqlite_file(path: Path, where: str) -> list[str]:
-    """Read-only look at an existing SQLite file: its Alembic revisions (empty list = a new database)."""
+def _writable(path: Path) -> bool:
+    return os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)
+
+
+def _readonly_uri(path: Path) -> str:
+    """An SQLite URI that opens ``path`` without ever writing to it or beside it."""
+    # mode=ro never writes the database. A WAL-mode file without its -wal companion is complete on disk,
+    # and immutable=1 then keeps SQLite from creating -wal/-shm files beside it; while a -wal exists (a
+    # writer may be running) a plain read-only connection reads the latest commits.
+    uri = f"{path.resolve().as_uri()}?mode=ro"
+    with path.open("rb") as fh:
+        wal_mode = fh.read(20)[18:20] == b"\x02\x02"
+    if wal_mode and not Path(f"{path}-wal").exists():
+        uri += "&immutable=1"
+    return uri
+
+
+def _inspect_sqlite_file(path: Path, where: str, readonly: bool = False) -> list[str]:
+    """Read-only look at an existing SQLite file: its Alembic revisions (empty list = a new database).
+
+    Unless ``readonly`` (the caller will only read), a file that cannot be written is refused.
+    """
     if path.is_dir():
         raise StoreError(f"{where} is a directory, not a database file: give a file path")
     try:
@@ -174,21 +194,13 @@ def _inspect_sqlite_file(path: Path, where: str) -> list[str]:
             f"{where} is not an SQLite database (it does not start with the SQLite header); it was left "
             "untouched: choose another --db"
         )
-    if not os.access(path, os.W_OK) or not os.access(path.parent, os.W_OK):
+    if not readonly and not _writable(path):
         raise StoreError(
             f"{where} is not writable (the file and its directory must be writable: SQLite keeps its "
             "write-ahead log beside the file)"
         )
-    # mode=ro never writes the database. A WAL-mode file without its -wal companion is complete on disk,
-    # and immutable=1 then keeps SQLite from creating -wal/-shm files beside it; while a -wal exists (a
-    # writer may be running) a plain read-only connection reads the latest commits.
-    uri = f"{path.resolve().as_uri()}?mode=ro"
-    with path.open("rb") as fh:
-        wal_mode = fh.read(20)[18:20] == b"\x02\x02"
-    if wal_mode and not Path(f"{path}-wal").exists():
-        uri += "&immutable=1"
     try:
-        conn = sqlite3.connect(uri, uri=True, timeout=30)
+        conn = sqlite3.connect(_readonly_uri(path), uri=True, timeout=30)
     except sqlite3.Error as exc:
         raise StoreError(f"cannot open {where}: {exc}") from exc
     try:
@@ -245,19 +257,42 @@ def _sqlite_on_begin(conn: Connection) -> None:
     conn.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
 
 
-def make_engine(url: URL) -> Engine:
-    """Create the engine with twisted's connection settings (SQLite: WAL, busy timeout, foreign keys)."""
+def _sqlite_readonly_on_connect(dbapi_connection: Any, _record: Any) -> None:
+    dbapi_connection.isolation_level = None  # as above; no journal-mode change: that would be a write
+    cursor = dbapi_connection.cursor()
+    try:
+        cursor.execute(f"PRAGMA busy_timeout = {SQLITE_BUSY_TIMEOUT_MS}")
+        cursor.execute("PRAGMA query_only = ON")
+    finally:
+        cursor.close()
+
+
+def make_engine(url: URL, readonly: bool = False) -> Engine:
+    """Create the engine with twisted's connection settings (SQLite: WAL, busy timeout, foreign keys).
+
+    ``readonly``: every connection only reads (SQLite: the file opened with ``mode=ro``; PostgreSQL:
+    read-only transactions).
+    """
     kwargs: dict[str, Any] = {}
-    if url.get_backend_name() == "sqlite":
+    path = sqlite_path(url) if readonly else None
+    if path is not None:
+        uri = _readonly_uri(path)
+        kwargs["creator"] = lambda: sqlite3.connect(
+            uri, uri=True, timeout=SQLITE_BUSY_TIMEOUT_MS / 1000, check_same_thread=False
+        )
+    elif url.get_backend_name() == "sqlite":
         kwargs["connect_args"] = {"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}
     else:
         kwargs["pool_pre_ping"] = True
+        if readonly:
+            kwargs["connect_args"] = {"options": "-c default_transaction_read_only=on"}
     try:
         engine = create_engine(url, **kwargs)
     except (ArgumentError, NoSuchModuleError, ImportError) as exc:
         raise StoreError(f"cannot use database {_display(url)!r}: {exc}") from exc
     if url.get_backend_name() == "sqlite":
-        event.listen(engine, "connect", _sqlite_on_connect)
+        on_connect = _sqlite_readonly_on_connect if path is not None else _sqlite_on_connect
+        event.listen(engine, "connect", on_connect)
         event.listen(engine, "begin", _sqlite_on_begin)
     return engine
 
@@ -326,12 +361,14 @@ def _upgrade(engine: Engine, url: URL) -> None:
                 raw.execute("PRAGMA foreign_keys = ON")
 
 
-def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True) -> Store:
+def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True, readonly: bool = False) -> Store:
     """Open (creating if new and ``create``) the twisted database at ``url`` and upgrade it to the heads.
 
-    ``upgrade=False`` only checks (for Alembic run by hand). Raises :class:`StoreError`, leaving whatever
-    is at ``url`` untouched, when the URL is malformed, the path cannot be created or written, the file is
-    not a twisted database, or its schema is newer.
+    ``upgrade=False`` only checks (for Alembic run by hand). ``readonly``: for commands that only read;
+    an existing database is opened without writing to it (nor beside it), even a file this process may
+    not write; only a schema older than this twisted's is upgraded first, when that is possible. Raises
+    :class:`StoreError`, leaving whatever is at ``url`` untouched, when the URL is malformed, the path
+    cannot be created or written, the file is not a twisted database, or its schema is newer.
     """
     parsed = parse_url(url)
     # A new SQLite file that other processes create and migrate at the same moment (collectors started
@@ -339,7 +376,7 @@ def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True) -> 
     # mode change, a hot journal seen read-only): such an open is retried after a short pause.
     for attempt in range(_OPEN_ATTEMPTS):
         try:
-            return _open_store(parsed, create=create, upgrade=upgrade)
+            return _open_store(parsed, create=create and not readonly, upgrade=upgrade, readonly=readonly)
         except StoreError as exc:
             retry = sqlite_path(parsed) is not None and "database is locked" in str(exc)
             if not retry or attempt == _OPEN_ATTEMPTS - 1:
@@ -351,7 +388,7 @@ def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True) -> 
 _OPEN_ATTEMPTS = 5
 
 
-def _open_store(parsed: URL, *, create: bool, upgrade: bool) -> Store:
+def _open_store(parsed: URL, *, create: bool, upgrade: bool, readonly: bool = False) -> Store:
     where = f"database {_display(parsed)!r}"
     heads = head_revisions()
     path = sqlite_path(parsed)
@@ -359,12 +396,21 @@ def _open_store(parsed: URL, *, create: bool, upgrade: bool) -> Store:
     if path is not None:
         where = f"database file {str(path)!r}"
         if path.exists():
-            current = _inspect_sqlite_file(path, where)
+            current = _inspect_sqlite_file(path, where, readonly=readonly)
+            if readonly and set(current) != heads:
+                if not current:
+                    raise StoreError(f"{where} holds no twisted data yet (run `twisted collect` first)")
+                if not _writable(path):
+                    raise StoreError(
+                        f"{where} has the older schema {', '.join(sorted(current))} and cannot be written "
+                        "to upgrade it: make it writable once, or copy it"
+                    )
+                readonly = False  # upgraded below like any command does, then read as usual
         elif not create:
             raise StoreError(f"{where} does not exist (run `twisted collect` first, or check --db)")
         else:
             _check_new_sqlite_path(path, where)
-    engine = make_engine(parsed)
+    engine = make_engine(parsed, readonly=readonly)
     try:
         if current is None:
             # PostgreSQL / in-memory SQLite: inspect through the engine (read-only queries).
@@ -374,10 +420,14 @@ def _open_store(parsed: URL, *, create: bool, upgrade: bool) -> Store:
             except DBAPIError as exc:
                 raise StoreError(f"cannot connect to {where}: {exc.orig}") from exc
         if upgrade and set(current) != heads:
+            writer = make_engine(parsed) if readonly else engine  # PostgreSQL: read-only sessions only after
             try:
-                _upgrade(engine, parsed)
+                _upgrade(writer, parsed)
             except DBAPIError as exc:
                 raise StoreError(f"cannot create or upgrade {where}: {exc.orig}") from exc
+            finally:
+                if writer is not engine:
+                    writer.dispose()
     except BaseException:
         engine.dispose()
         raise

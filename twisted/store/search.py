@@ -11,6 +11,11 @@ Tables:
   search time, simulator calls, the numpy RNG state, the selection statistics), written in the
   same transaction as the nodes created up to that boundary.
 
+A run is written by one process at a time, its *lease holder*: ``runs.host`` / ``runs.pid`` while
+``runs.status = 'running'``. :func:`take_lease` makes the calling process the holder atomically (under
+the write lock, or a row lock on PostgreSQL), refusing while the holder is alive; a holder that is gone
+(SIGKILL) is taken over. Every write of :class:`SearchRun` checks that this process still holds it.
+
 The found low-level plan is the path from the root to ``search_runs.goal_node_id`` (a recursive
 query over ``parent_id``; see :func:`solution_path` and the README). The high-level plans live in
 the plan cache (``twisted/store/plans.py``). This module knows no simulator: it stores arrays and
@@ -52,7 +57,9 @@ from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
 
 __all__ = [
+    "LEASE_STALE_S",
     "OUTCOMES",
+    "RunBusyError",
     "SearchCheckpoint",
     "SearchNode",
     "SearchRun",
@@ -63,10 +70,54 @@ __all__ = [
     "find_resumable_run",
     "load_run",
     "solution_path",
+    "take_lease",
 ]
 
 # running: in progress (or killed without a chance to say so); the others are set when it stops.
 OUTCOMES = ("running", "solved", "timeout", "interrupted", "stopped")
+
+# A lease held from another host (whose process cannot be checked from here) is taken over only when its
+# run has written nothing for this long (a search writes a checkpoint every few seconds).
+LEASE_STALE_S = 600.0
+
+
+class RunBusyError(RuntimeError):
+    """Another live process writes the run (or took it over from this one); the message names it."""
+
+
+def _process_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # exists, owned by someone else
+    return True
+
+
+def _other_holder(
+    status: str, host: str | None, pid: int | None, last_write: dt.datetime | None = None
+) -> str | None:
+    """Who else holds a run's lease ("process 123 on host h"), or None when nobody alive does.
+
+    ``last_write`` (when known) lets a lease from another host expire after :data:`LEASE_STALE_S`.
+    """
+    if status != "running" or pid is None:
+        return None
+    here = socket.gethostname()
+    if host == here:
+        if pid == os.getpid() or not _process_alive(pid):
+            return None
+        return f"process {pid}"
+    if last_write is None:
+        return None
+    if last_write.tzinfo is None:  # SQLite hands back naive UTC
+        last_write = last_write.replace(tzinfo=dt.UTC)
+    if (utcnow() - last_write).total_seconds() >= LEASE_STALE_S:
+        return None
+    return f"process {pid} on host {host}"
 
 
 class SearchRunRow(Base):
@@ -196,24 +247,20 @@ class SearchRunInfo:
     nodes: list[StoredNode]
     host: str | None = None
     pid: int | None = None
+    last_write: dt.datetime | None = None  # the checkpoint's updated_at
 
     @property
     def live(self) -> bool:
-        """Still searched by another process of this host (a killed one left ``running`` behind is not).
+        """Still searched by another live process (a killed one left ``running`` behind is not).
 
-        A run of another host cannot be checked from here and counts as not live.
+        A run of another host counts as live until it has written nothing for :data:`LEASE_STALE_S`.
         """
-        if self.status != "running" or self.host != socket.gethostname() or self.pid is None:
-            return False
-        if self.pid == os.getpid():
-            return False
-        try:
-            os.kill(self.pid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:
-            return True
-        return True
+        return self.holder is not None
+
+    @property
+    def holder(self) -> str | None:
+        """The other live process that holds the run's lease, in words; None when there is none."""
+        return _other_holder(self.status, self.host, self.pid, self.last_write)
 
 
 # --- writing a run ---------------------------------------------------------------------------------------
@@ -338,15 +385,23 @@ class SearchRun:
             for name, value in values.items():
                 setattr(existing, name, value)
         # the generic counters of runs: simulator calls tried, nodes kept, search time
-        session.execute(
-            update(Run)
-            .where(Run.id == self.run_id)
-            .values(
-                tried=checkpoint.sim_calls,
-                kept=len(self._node_ids),
-                wall_seconds=float(checkpoint.elapsed_s),
-            )
+        self._update_held_run(
+            session,
+            tried=checkpoint.sim_calls,
+            kept=len(self._node_ids),
+            wall_seconds=float(checkpoint.elapsed_s),
         )
+
+    def _update_held_run(self, session: Session, **values: Any) -> None:
+        """Update the ``runs`` row if this process still holds the lease, else RunBusyError (rolled back)."""
+        done: Any = session.execute(
+            update(Run)
+            .where(Run.id == self.run_id, Run.host == socket.gethostname(), Run.pid == os.getpid())
+            .values(**values)
+        )
+        if done.rowcount != 1:
+            message = f"run {self.run_id} is no longer held by this process (another one took it over)"
+            raise RunBusyError(message)
 
     def save(self, nodes: Sequence[NodeLike], checkpoint: CheckpointLike) -> None:
         """Write ``nodes`` (setting their ``db_id``) and ``checkpoint`` in one transaction."""
@@ -354,16 +409,8 @@ class SearchRun:
             self._write(session, nodes, checkpoint)
 
     def resumed(self) -> None:
-        """Mark the run as running again (this process) after a resume."""
-        with self.store.session(write=True) as session:
-            session.execute(
-                update(Run)
-                .where(Run.id == self.run_id)
-                .values(status="running", ended_at=None, host=socket.gethostname(), pid=os.getpid())
-            )
-            session.execute(
-                update(SearchRunRow).where(SearchRunRow.run_id == self.run_id).values(outcome="running")
-            )
+        """Take the run over for this process after a resume (:func:`take_lease`)."""
+        take_lease(self.store, self.run_id)
 
     def finish(self, outcome: str, goal_node: NodeLike | None, checkpoint: CheckpointLike) -> None:
         """Record how the run ended: solved / timeout / interrupted / stopped."""
@@ -378,15 +425,12 @@ class SearchRun:
                 .where(SearchRunRow.run_id == self.run_id)
                 .values(outcome=outcome, goal_node_id=goal_id)
             )
-            session.execute(
-                update(Run)
-                .where(Run.id == self.run_id)
-                .values(
-                    status="interrupted" if outcome == "interrupted" else "finished",
-                    ended_at=utcnow(),
-                    message=outcome,
-                    wall_seconds=float(checkpoint.elapsed_s),
-                )
+            self._update_held_run(
+                session,
+                status="interrupted" if outcome == "interrupted" else "finished",
+                ended_at=utcnow(),
+                message=outcome,
+                wall_seconds=float(checkpoint.elapsed_s),
             )
 
 
@@ -449,7 +493,8 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
         goal_key = session.scalar(
             select(TopologicalState.key).where(TopologicalState.id == row.goal_state_id)
         )
-        checkpoint = _checkpoint(session.get(SearchCheckpoint, run_id))
+        checkpoint_row = session.get(SearchCheckpoint, run_id)
+        checkpoint = _checkpoint(checkpoint_row)
         nodes = _nodes(session, run_id) if with_nodes else []
         parameters = dict(run.parameters or {})
         if row.goal_knot is not None:
@@ -470,7 +515,35 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             nodes=nodes,
             host=run.host,
             pid=run.pid,
+            last_write=checkpoint_row.updated_at if checkpoint_row is not None else None,
         )
+
+
+def take_lease(store: Any, run_id: int) -> None:
+    """Make this process the one writer of planner run ``run_id`` (status ``running``, its host and pid).
+
+    Atomic: SQLite's write lock (PostgreSQL: a row lock) is held from the check to the update, so of two
+    processes resuming one run at once exactly one gets it. Raises :class:`RunBusyError` while another
+    live process holds it, and LookupError when the run is not a resumable planner run.
+    """
+    with store.session(write=True) as session:
+        run = session.get(Run, run_id, with_for_update=True)
+        row = session.get(SearchRunRow, run_id)
+        if run is None or row is None:
+            raise LookupError(f"run {run_id} is not a planner run in this database")
+        if row.outcome == "solved":
+            raise LookupError(f"run {run_id} already solved its goal (see `twisted replay {run_id}`)")
+        checkpoint = session.get(SearchCheckpoint, run_id)
+        holder = _other_holder(
+            run.status, run.host, run.pid, checkpoint.updated_at if checkpoint is not None else None
+        )
+        if holder is not None:
+            raise RunBusyError(
+                f"run {run_id} is being searched by {holder}: stop it first (Ctrl-C checkpoints it), "
+                "or wait for it to end"
+            )
+        run.status, run.ended_at, run.host, run.pid = "running", None, socket.gethostname(), os.getpid()
+        row.outcome = "running"
 
 
 def discard_after_checkpoint(store: Any, run_id: int) -> int:

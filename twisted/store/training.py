@@ -12,10 +12,11 @@
 from __future__ import annotations
 
 import datetime as dt
+import math
 from typing import Any
 
 from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String, Text
-from sqlalchemy.orm import Mapped, mapped_column
+from sqlalchemy.orm import Mapped, mapped_column, validates
 
 from twisted.store.models import Base, utcnow
 
@@ -58,8 +59,24 @@ class Checkpoint(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+class NonFiniteModelError(ValueError):
+    """A model whose losses are NaN or infinite (its training diverged) is not stored; says which."""
+
+    def __init__(self, message: str, training_run_id: int | None) -> None:
+        super().__init__(message)
+        self.training_run_id = training_run_id
+
+
+# Losses that every finished model reports; NaN weights make them NaN, so they guard the weights too.
+GUARDED_LOSSES = ("val_loss", "train_loss")
+
+
 class TrainedModel(Base):
-    """A finished inverse model; the planner takes the newest unless told otherwise."""
+    """A finished inverse model; the planner takes the newest unless told otherwise.
+
+    Only a model whose losses are finite numbers is stored (:class:`NonFiniteModelError` otherwise): a
+    diverged training must not become the newest model that every later plan picks up.
+    """
 
     __tablename__ = "models"
 
@@ -72,3 +89,24 @@ class TrainedModel(Base):
     size_bytes: Mapped[int] = mapped_column(Integer)
     weights: Mapped[bytes] = mapped_column(LargeBinary)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    @validates("metrics")
+    def _finite_losses(self, _key: str, metrics: dict[str, Any]) -> dict[str, Any]:
+        for name in GUARDED_LOSSES:
+            value = (metrics or {}).get(name)
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise NonFiniteModelError(
+                    f"training run {self.training_run_id}: the model's {name.replace('_', ' ')} is {value}, "
+                    "so it was not stored (training diverged; try a smaller --lr)",
+                    self.training_run_id,
+                )
+        return metrics
+
+
+def mark_training_failed(store: Any, training_run_id: int, message: str) -> None:
+    """End a training run as ``failed`` (it cannot be resumed) with ``message``."""
+    with store.session(write=True) as session:
+        row = session.get(TrainingRun, training_run_id)
+        if row is not None:  # the message held the command line: keep it after the reason
+            row.status, row.ended_at = "failed", utcnow()
+            row.message = message if not row.message else f"{message}\n{row.message}"
