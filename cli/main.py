@@ -7,17 +7,13 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-import signal
 import sys
 
 import cli
 from cli import interrupt
 
-if "__mp_main__" in sys.modules:
-    # imported to start a worker process (multiprocessing's forkserver or spawn). Ctrl-C reaches the
-    # whole process group; the command's own process stops the workers (a worker killed by it would
-    # lose its job, and a pool would wait for that result for ever).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+if "__mp_main__" in sys.modules:  # imported to start a worker process (multiprocessing)
+    interrupt.worker_process()
 else:
     interrupt.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
 

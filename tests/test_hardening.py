@@ -252,6 +252,35 @@ def test_ctrl_c_to_the_process_group_during_the_search_leaves_the_workers_alone(
     assert "Traceback" not in err and "--resume 1" in err
 
 
+def test_workers_of_a_killed_plan_leave_quietly(tmp_path: Path) -> None:
+    """Before: after a SIGKILL of plan its simulator workers printed BrokenPipeError tracebacks."""
+    path = tmp_path / "p.db"
+    proc = _proc(
+        "--db",
+        f"sqlite:///{path}",
+        "plan",
+        "--goal",
+        THREE_CROSSINGS,
+        "--planner",
+        "random-low",
+        "--workers",
+        "2",
+        "--timeout",
+        "120",
+        "--checkpoint-every",
+        "0",
+        start_new_session=True,
+    )
+    try:
+        _wait_for(path, "SELECT MAX(iteration) >= 2 FROM search_checkpoints", proc)
+        workers = [int(p) for p in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
+        proc.kill()
+        _, err = proc.communicate(timeout=30)  # the pipe closes when the last worker has gone
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+    assert workers and "Traceback" not in err, err[-2000:]
+
+
 # --- 2, 3. collect: Ctrl-C at its start, SIGTERM's exit code ---------------------------------------------
 
 
