@@ -98,7 +98,6 @@ class Soak:
         self.kills: Counter[str] = Counter()
         self.codes: Counter[str] = Counter()
         self.problems: list[str] = []
-        self.known: Counter[str] = Counter()  # faults outside this soak's reach, counted apart
 
     def kill_at_random(self, proc: subprocess.Popen[str], phase: str, normal_codes: tuple[int, ...]) -> bool:
         """Wait a random moment, send a random signal; True when it was killed (not finished first)."""
@@ -125,9 +124,7 @@ class Soak:
         expected = (EXPECTED[signum],) if killed else normal_codes
         if proc.returncode not in expected:
             self.problems.append(f"{phase} {name}: exit {proc.returncode}, expected {expected}: {err[-600:]}")
-        if "Traceback" in err and killed and signum == signal.SIGKILL and _only_pool_broken_pipes(err):
-            self.known["simulator pool workers print BrokenPipeError after a SIGKILL of plan"] += 1
-        elif "Traceback" in err:
+        if "Traceback" in err:
             self.problems.append(f"{phase} {name}: a traceback on stderr: {err[-1500:]}")
         deadline = time.monotonic() + 30
         while any(alive(p) for p in descendants) and time.monotonic() < deadline:
@@ -216,12 +213,6 @@ class Soak:
 @functools.cache
 def engine(url: str) -> Any:
     return create_engine(url)
-
-
-def _only_pool_broken_pipes(err: str) -> bool:
-    """stderr whose tracebacks all come from multiprocessing pool workers writing to a dead parent."""
-    blocks = err.split("Traceback (most recent call last):")[1:]
-    return all("multiprocessing/pool.py" in b and "BrokenPipeError" in b for b in blocks)
 
 
 def tree(url: str, run_id: int) -> list[tuple[Any, ...]]:
@@ -381,8 +372,6 @@ def main() -> None:
         "checks: integrity_check, foreign_key_check (SQLite), collect rows (counters = rows, no batch or "
         "transition twice, one root), tree rows 0..n-1 once, trees equal the reference, no run left running"
     )
-    for what, n in soak.known.items():
-        print(f"known, not counted as failures: {what}: {n} times")
     if failed:
         print(f"FAILED ({len(failed)}):")
         for line in failed:

@@ -7,7 +7,10 @@ lost: a shell starts background jobs with SIGINT ignored, and Python keeps it ig
 
 from __future__ import annotations
 
+import os
 import signal
+import threading
+import time
 from types import FrameType
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -33,3 +36,28 @@ def exit_code(exc: BaseException) -> int | None:
     if isinstance(exc, KeyboardInterrupt):
         return 128 + signal.SIGINT
     return None
+
+
+def worker_process() -> None:
+    """For a worker process that a command starts (it imports ``cli.main`` to bootstrap).
+
+    Ctrl-C reaches the whole process group, but it is the command's process that stops the workers (a
+    worker killed by it would lose its job, and a pool waits for that result for ever): ignore it. And
+    leave as soon as the command's process is gone (SIGKILL): the results have nowhere to go, and
+    writing them into the closed pipe only prints BrokenPipeError tracebacks.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, name="twisted-exit-with-parent", daemon=True).start()
+
+
+def _exit_with_parent() -> None:
+    import multiprocessing
+    import multiprocessing.connection
+
+    deadline = time.monotonic() + 30  # the parent is known once the bootstrap has read it
+    while (parent := multiprocessing.parent_process()) is None:
+        if time.monotonic() > deadline:
+            return  # not a multiprocessing child after all (a forkserver preloading its main module)
+        time.sleep(0.02)
+    multiprocessing.connection.wait([parent.sentinel])
+    os._exit(0)

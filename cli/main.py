@@ -12,7 +12,10 @@ import sys
 import cli
 from cli import interrupt
 
-interrupt.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
+if "__mp_main__" in sys.modules:  # imported to start a worker process (multiprocessing)
+    interrupt.worker_process()
+else:
+    interrupt.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
 
 
 def load_commands() -> None:
