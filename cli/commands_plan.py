@@ -183,6 +183,15 @@ def plan_command(
         sampler, used_model_id = curve_sampler(store, options.planner, model_id)
     except PlanInputError as exc:
         fail(str(exc))
+    model = getattr(sampler, "model", None)
+    if model is not None and hasattr(model, "metadata") and not as_json:
+        sources = model.metadata.get("data_sources") or {"collect": model.metadata.get("data_size")}
+        err_console.print(
+            f"inverse model {'(shipped default)' if used_model_id is None else used_model_id}: trained on "
+            + ", ".join(f"{n:,} {source}" for source, n in sources.items() if n)
+            + " samples",
+            highlight=False,
+        )
 
     stop = StopSignals()
     columns = (
