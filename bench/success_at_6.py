@@ -43,6 +43,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--steps", nargs="+", default=["0->1", "1->2", "2->3", "+2"])
     ap.add_argument(
+        "--explained",
+        action="store_true",
+        help="only transitions that one high-level move explains (what the planner asks the model for)",
+    )
+    ap.add_argument(
         "--compare-default", action="store_true", help="also the shipped default model, same transitions"
     )
     ap.add_argument("--json", help="write the figures to this file")
@@ -70,7 +75,20 @@ def main() -> None:
     if args.link_temperature is not None:
         model.link_temperature = args.link_temperature
     rng = np.random.default_rng(args.seed)
-    held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
+    if args.explained:
+        from twisted.moves import explains
+
+        # draw from every held-out transition, keep the explained ones, at most per_step of each step
+        pool = held_out_transitions(store, model, 10**9, rng, steps=args.steps, side=args.side)
+        pool = [t for t in pool if explains(t.p_from, t.p_to) is not None]
+        held = []
+        for step in args.steps:
+            of_step = [t for t in pool if t.step == step]
+            if len(of_step) > args.per_step:
+                of_step = [of_step[i] for i in sorted(rng.choice(len(of_step), args.per_step, replace=False))]
+            held += of_step
+    else:
+        held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
     meta = model.metadata
     print(
         f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
