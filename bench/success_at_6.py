@@ -1,11 +1,14 @@
 """success@6 of the inverse model on held-out transitions, per crossing step, next to 6 random curves.
 
     python bench/success_at_6.py --db sqlite:///collect.db [--model-id N] [--per-step 60] [--workers 2]
+        [--steps 0->1 1->2 2->3 3->4 4->5 5->6] [--compare-default]
 
 For every held-out transition (the validation side of the model's split, plus transitions newer
 than its data snapshot) 6 curves are sampled from the model for (q, next state) and 6 uniform
 random curves are drawn; each is simulated from q (SimPool); the transition is solved when any
-result has the next P-data. Prints the table and, with --json, writes the figures.
+result has the next P-data. With --compare-default the shipped default model samples 6 curves for
+the same transitions too (its own column; the held-out set is the evaluated model's). Prints the
+table and, with --json, writes the figures.
 """
 
 from __future__ import annotations
@@ -39,6 +42,14 @@ def main() -> None:
     )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--steps", nargs="+", default=["0->1", "1->2", "2->3", "+2"])
+    ap.add_argument(
+        "--explained",
+        action="store_true",
+        help="only transitions that one high-level move explains (what the planner asks the model for)",
+    )
+    ap.add_argument(
+        "--compare-default", action="store_true", help="also the shipped default model, same transitions"
+    )
     ap.add_argument("--json", help="write the figures to this file")
     ap.add_argument("--oversample", type=int, default=None, help="override the model's sampling setting")
     ap.add_argument("--link-temperature", type=float, default=None, help="override the model's setting")
@@ -64,7 +75,20 @@ def main() -> None:
     if args.link_temperature is not None:
         model.link_temperature = args.link_temperature
     rng = np.random.default_rng(args.seed)
-    held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
+    if args.explained:
+        from twisted.moves import explains
+
+        # draw from every held-out transition, keep the explained ones, at most per_step of each step
+        pool = held_out_transitions(store, model, 10**9, rng, steps=args.steps, side=args.side)
+        pool = [t for t in pool if explains(t.p_from, t.p_to) is not None]
+        held = []
+        for step in args.steps:
+            of_step = [t for t in pool if t.step == step]
+            if len(of_step) > args.per_step:
+                of_step = [of_step[i] for i in sorted(rng.choice(len(of_step), args.per_step, replace=False))]
+            held += of_step
+    else:
+        held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
     meta = model.metadata
     print(
         f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
@@ -73,13 +97,18 @@ def main() -> None:
         f"link temperature {model.link_temperature}"
     )
     t0 = time.perf_counter()
+    shipped = None
     with SimPool(args.workers) as pool:
         results = success_at_k(model, held, pool, rng, k=args.k, random_curves=args.random_curves)
+        if args.compare_default:
+            default = load_model(None)
+            shipped = success_at_k(default, held, pool, np.random.default_rng(args.seed + 1), args.k, 0)
     wall = time.perf_counter() - t0
     k = args.k
     print(
         f"{'step':6s} {'n':>5s} {'model@' + str(k):>9s} {'random@' + str(k):>10s} {'ratio':>6s}"
         f" {'random@' + str(k) + ' expected':>18s} {'ratio':>6s}"
+        + (f" {'shipped@' + str(k):>10s}" if shipped is not None else "")
     )
     rows = []
     for step in args.steps:
@@ -89,9 +118,11 @@ def main() -> None:
             continue
         ratio = r.model_rate / r.random_rate if r.solved_random else float("nan")
         ratio_expected = r.model_rate / r.random_expected if r.random_expected > 0 else float("nan")
+        shipped_rate = shipped[step].model_rate if shipped is not None else None
         print(
             f"{step:6s} {r.n:5d} {r.model_rate:9.3f} {r.random_rate:10.3f} {ratio:6.2f}"
             f" {r.random_expected:18.3f} {ratio_expected:6.2f}"
+            + (f" {shipped_rate:10.3f}" if shipped_rate is not None else "")
         )
         rows.append(
             {
@@ -103,9 +134,11 @@ def main() -> None:
                 "random_curves": r.random_curves,
                 "solved_model": r.solved_model,
                 "solved_random": r.solved_random,
+                "shipped": shipped_rate,
             }
         )
     sims = sum((k + r.random_curves) * r.n for r in results.values())
+    sims += sum(k * r.n for r in shipped.values()) if shipped is not None else 0
     print(
         f"{sims} simulations in {wall:.0f} s on {args.workers} workers; 'random@{k} expected' estimates each "
         f"transition's per-curve hit rate p from all its random curves: mean(1 - (1 - p)^{k})"

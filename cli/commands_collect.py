@@ -54,6 +54,11 @@ def collect_command(
     ),
     max_tries: int | None = typer.Option(None, "--max-tries", help="Also stop after this many tried curves."),
     friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (1 = nominal)."),
+    across_share: float = typer.Option(
+        0.8,
+        "--across-share",
+        help="Share of curves aimed across another strand (the rest uniform; 0: all uniform).",
+    ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
     ),
@@ -93,6 +98,7 @@ def collect_command(
         max_kept=max_kept,
         max_tries=max_tries,
         friction_scale=friction_scale,
+        across_share=across_share,
     )
     try:
         options.validate()

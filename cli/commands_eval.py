@@ -66,7 +66,7 @@ def problems_make(
     sets: Annotated[
         list[str] | None,
         typer.Option(
-            "--set", help="Only these sets (easy, medium, hard, unseen-3, 4); repeatable. Default: all."
+            "--set", help="Only these sets (easy, medium, hard, unseen-3, 4, 5); repeatable. Default: all."
         ),
     ] = None,
 ) -> None:

@@ -158,6 +158,7 @@ def plan_command(
         start_config=start_config,
         model_id=model_id,
         workers=workers,
+        as_json=as_json,
         search_options={
             "planner": planner,
             "heuristic": heuristic,
@@ -259,6 +260,7 @@ class _Request:
     model_id: int | None
     workers: int
     search_options: dict[str, Any]
+    as_json: bool = False
 
 
 @dataclass
@@ -308,9 +310,24 @@ def _set_up(
             sampler, used_model_id = curve_sampler(store, options.planner, model_id)
         except PlanInputError as exc:
             fail(str(exc))
+    _print_model(sampler, used_model_id, request.as_json)
     step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
     pool = resources.enter_context(SimPool(request.workers))
     return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool)
+
+
+def _print_model(sampler: Any, used_model_id: int | None, as_json: bool) -> None:
+    """Which inverse model the search samples from, and how many samples of each source trained it."""
+    model = getattr(sampler, "model", None)
+    if model is None or not hasattr(model, "metadata") or as_json:
+        return
+    sources = model.metadata.get("data_sources") or {"collect": model.metadata.get("data_size")}
+    err_console.print(
+        f"inverse model {'(shipped default)' if used_model_id is None else used_model_id}: trained on "
+        + ", ".join(f"{n:,} {source}" for source, n in sources.items() if n)
+        + " samples",
+        highlight=False,
+    )
 
 
 def _run_to_continue(store: Any, request: _Request, goal_p: Any) -> tuple[int | None, Any, int | None]:

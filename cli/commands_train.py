@@ -19,6 +19,22 @@ def _fmt(value: Any, spec: str = ".3f") -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else format(value, spec)
 
 
+def _by_source(metrics: dict[str, Any], sides: str = "train,val") -> str:
+    """``collect 3,126 / 324, search 812 / 90`` (training / validation samples per source); models from
+    before sources were counted saw collected transitions only."""
+    from twisted.model.data import SOURCES
+
+    wanted = sides.split(",")
+    parts = []
+    for source in SOURCES:
+        counts = [metrics.get(f"n_{side}_{source}") for side in wanted]
+        if source == "collect" and all(c is None for c in counts):
+            counts = [metrics.get(f"n_{side}") for side in wanted]  # older models: collected data only
+        if any(c for c in counts):
+            parts.append(f"{source} " + " / ".join("-" if c is None else f"{c:,}" for c in counts))
+    return ", ".join(parts) or "-"
+
+
 @app.command("train")
 def train_command(
     ctx: typer.Context,
@@ -42,6 +58,14 @@ def train_command(
     ),
     new_visits: bool = typer.Option(
         True, "--new-visits/--no-new-visits", help="Condition on where the next state's new crossings land."
+    ),
+    move: bool = typer.Option(
+        True, "--move/--no-move", help="Condition on the abstract move (R1/R2/Cross, segments, sides)."
+    ),
+    sources: str = typer.Option(
+        "collect",
+        "--from",
+        help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
     ),
     val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
@@ -71,6 +95,11 @@ def train_command(
         fail("--device cuda: no CUDA device is available to torch here; use --device cpu")
     if link_head not in ("pointer", "dense"):
         fail(f"--link-head must be pointer or dense, got {link_head!r}")
+    from twisted.model.data import SOURCES
+
+    chosen = tuple(dict.fromkeys(s.strip() for s in sources.split(",") if s.strip()))
+    if not chosen or any(s not in SOURCES for s in chosen):
+        fail(f"--from must be a comma-separated list of {', '.join(SOURCES)}, got {sources!r}")
     if threads is not None:
         torch.set_num_threads(threads)
     config = TrainConfig(
@@ -84,8 +113,14 @@ def train_command(
         augment=augment,
         checkpoint_every_s=checkpoint_every_s,
         net=NetConfig(
-            hidden=hidden, layers=layers, components=components, link_head=link_head, new_visits=new_visits
+            hidden=hidden,
+            layers=layers,
+            components=components,
+            link_head=link_head,
+            new_visits=new_visits,
+            move=move,
         ),
+        sources=chosen,
     )
     store = open_db(ctx)
 
@@ -141,9 +176,10 @@ def train_command(
         return
     console.print(
         f"model {outcome.model_id} stored (training run {outcome.training_run_id}, "
-        f"{outcome.n_train} training / {outcome.n_val} validation transitions, "
+        f"{outcome.n_train} training / {outcome.n_val} validation samples, "
         f"best epoch {m.get('best_epoch')})"
     )
+    console.print("  samples by source: " + _by_source(m))
     for side in ("val", "train"):
         if f"{side}_loss" in m:
             console.print(
@@ -185,13 +221,24 @@ def models_command(
         shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"
         console.print(f"no models in the database; planning uses {shipped}")
         return
-    table = Table("id", "name", "training run", "data size", "val NLL", "link acc", "size", "created")
+    table = Table(
+        "id",
+        "name",
+        "training run",
+        "data size",
+        "train samples by source",
+        "val NLL",
+        "link acc",
+        "size",
+        "created",
+    )
     for m in models:
         table.add_row(
             str(m.id),
             m.name,
             "-" if m.training_run_id is None else str(m.training_run_id),
             str(m.data_size),
+            _by_source(m.metrics, "train"),
             _fmt(m.metrics.get("val_loss")),
             _fmt(m.metrics.get("val_link_accuracy"), ".3f"),
             f"{m.size_bytes / 1e6:.1f} MB",

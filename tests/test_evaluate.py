@@ -31,7 +31,7 @@ from twisted.evaluate import (
     write_report,
 )
 from twisted.goals import state_goal
-from twisted.moves import enumerate_states
+from twisted.moves import enumerate_states, successors
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, EvalRun, ProblemRecord, load_problem_set, save_problem_set
 from twisted.store.models import Configuration, Run, TopologicalState, Transition, array_to_blob
@@ -114,7 +114,7 @@ def test_problem_sets_cut_thirds_and_replay_from_seed(synthetic, tmp_path: Path)
     ranked = sorted(freq, key=lambda k: -freq[k])  # distinct frequencies: no ties
     thirds = {"easy": set(ranked[:4]), "medium": set(ranked[4:8]), "hard": set(ranked[8:])}
     records = {r.name: r for r in make_problem_sets_in_store(store, per_set=2, seed=7)}
-    assert set(records) == {"easy", "medium", "hard", "unseen-3", "4"}
+    assert set(records) == {"easy", "medium", "hard", "unseen-3", "4", "5"}
     for name, third in thirds.items():
         goals = records[name].problems
         assert len(goals) == 2 and {p.p_data.key for p in goals} <= third
@@ -126,12 +126,17 @@ def test_problem_sets_cut_thirds_and_replay_from_seed(synthetic, tmp_path: Path)
     assert all(p.p_data.key in all3 and p.p_data.key not in freq and p.frequency == 0 for p in unseen)
     four = records["4"].problems
     assert len(four) == 2 and all(p.p_data.cross == 4 and p.tag == "4-unseen" for p in four)
+    # 5: none visited here, so states one move beyond the 4-crossing goals
+    five = records["5"].problems
+    assert len(five) == 2 and all(p.p_data.cross == 5 and p.tag == "5-unseen" for p in five)
+    beyond = {s.state for g in four for s in successors(g.p_data)}
+    assert all(p.p_data in beyond for p in five)
 
     def keys(prefix: str) -> dict[str, list[str]]:
         with store.session() as session:
             return {
                 n: [p.p_data.key for p in load_problem_set(session, prefix + n).problems]
-                for n in ("easy", "medium", "hard", "unseen-3", "4")
+                for n in ("easy", "medium", "hard", "unseen-3", "4", "5")
             }
 
     # same seed, same sets; other seeds draw others

@@ -29,6 +29,7 @@ from twisted.model.encoding import (
     Preprocessed,
     crossing_features,
     curve_to_target,
+    encode_move,
     encode_new_visits,
     encode_p_data,
     new_visit_link_features,
@@ -37,6 +38,7 @@ from twisted.model.encoding import (
     target_to_curve,
 )
 from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig, astuple_shallow
+from twisted.moves import explains
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, RopeSim, sample_curve
 from twisted.topology import EMPTY, PData, top
 
@@ -161,6 +163,7 @@ def condition(p_now: list[PData], p_next: list[PData]) -> Condition:
         torch.as_tensor(np.stack([encode_p_data(p) for p in p_now])),
         torch.as_tensor(np.stack([encode_p_data(p) for p in p_next])),
         torch.as_tensor(np.stack([encode_new_visits(a, b) for a, b in zip(p_now, p_next, strict=True)])),
+        torch.as_tensor(np.stack([encode_move(explains(a, b)) for a, b in zip(p_now, p_next, strict=True)])),
     )
 
 

@@ -157,9 +157,10 @@ def test_plan_with_tighten_ends_only_on_a_goal_state_that_passes_the_pull_test(t
     assert code == 0 and _json(out)["ties_goal"] is True, out
 
 
-def test_a_knotoid_goal_pulls_out_to_the_unknot_and_replay_tighten_exits_3(tmp_path: Path) -> None:
-    """The end tucked in a loop is not a knot: the rope reaches the state, but pulled tight it comes out
-    straight; the state names no knot, so the pull test cannot pass (exit 3)."""
+def test_a_knotoid_goal_names_no_knot_and_replay_tighten_exits_3(tmp_path: Path) -> None:
+    """The end tucked in a loop is not a knot: the rope reaches the state, and pulled tight it ties one of
+    the two closures (which one depends on how the end leaves the loop: the unknot or the trefoil); the
+    state names no knot, so the pull test cannot pass (exit 3)."""
     assert identify(parse_p_data(KNOTOID_2)).describe() == "knotoid: under 0_1, over 3_1+"
     db = f"sqlite:///{tmp_path / 'knotoid.db'}"
     result = _plan(db, "--goal", KNOTOID_2)
@@ -171,11 +172,12 @@ def test_a_knotoid_goal_pulls_out_to_the_unknot_and_replay_tighten_exits_3(tmp_p
     assert replayed["reached_goal"] is True and replayed["ties_goal"] is False
     assert replayed["goal_knot_types"] == []
     t = replayed["tightened"]
-    assert t["ok"] is True and t["knot_type"] == "0_1" and t["knot"]["is_knot"] is True
-    assert t["end_distance_m"] > ROPE_LENGTH_M - 0.1  # nothing left to hold rope
+    assert t["ok"] is True and t["knot_type"] in ("0_1", "3_1+") and t["knot"]["is_knot"] is True
+    if t["knot_type"] == "0_1":
+        assert t["end_distance_m"] > ROPE_LENGTH_M - 0.1  # nothing left to hold rope
     with open_store(db) as store, store.session() as session:
         [row] = tightenings(session, result["run_id"])
-    assert row.knot_before == "knotoid: under 0_1, over 3_1+" and row.knot_after == "0_1"
+    assert row.knot_before == "knotoid: under 0_1, over 3_1+" and row.knot_after == t["knot_type"]
     assert row.ties_goal is False and row.goal_knot is None
     code, out = _cli(db, "replay", run_id, "--tighten")
     assert code == 3 and "does not tie" in " ".join(out.split())

@@ -11,7 +11,8 @@ as the root when there is none). Each iteration a worker
    straight rope (the only 0-crossing configuration) in use, and a steeper bias (e.g. ``2 ** c``) was
    measured to halve the kept rate: random curves from 4-5 crossings are kept 1-3 % of the time
    against 5-8 % from 1-3 crossings;
-2. applies a uniform random curve ``c_t`` (``twisted.sim.sample_curve``);
+2. applies a random curve ``c_t``: with probability ``across_share`` one aimed across another strand
+   of q (:func:`twisted.proposals.across_curve`), else a uniform one (``twisted.sim.sample_curve``);
 3. keeps the transition ``(q, s, c_t, q', s')`` when the simulation is valid and
    ``Cross(s) < Cross(s') <= max_cross``; q' joins D_Q once committed.
 
@@ -79,6 +80,7 @@ if TYPE_CHECKING:  # twisted.sim (MuJoCo) is imported where the simulation runs
 RUN_KIND = "collect"
 MAX_ENCODED_CROSS = 6  # the inverse model encodes goals of up to 6 crossings
 MAX_HOURS = 1e5  # more is a typo (and overflows the clock arithmetic near 1e308)
+ACROSS_SHARE = 0.8  # bench/bench_collect_curves.py: kept per hour per core, uniform vs across curves
 
 
 class CollectError(ValueError):
@@ -100,6 +102,8 @@ class CollectOptions:
     max_tries: int | None = None
     friction_scale: float = 1.0
     refresh_seconds: float = 2.0
+    # share of curves aimed across another strand (twisted.proposals); the rest are uniform
+    across_share: float = ACROSS_SHARE
 
     def validate(self) -> None:
         """Raise :class:`CollectError` naming the first bad option."""
@@ -122,6 +126,8 @@ class CollectOptions:
             raise CollectError(f"--friction-scale must be at most 100, got {self.friction_scale!r}")
         if not (math.isfinite(self.cross_bias) and 0 <= self.cross_bias <= 10):
             raise CollectError(f"--cross-bias must be between 0 and 10, got {self.cross_bias!r}")
+        if not (math.isfinite(self.across_share) and 0 <= self.across_share <= 1):
+            raise CollectError(f"--across-share must be between 0 and 1, got {self.across_share!r}")
         positive("max_kept", self.max_kept, allow_none=True)
         positive("max_tries", self.max_tries, allow_none=True)
         if not 1 <= self.max_cross <= 20:
@@ -376,30 +382,32 @@ def record_curve(
 def _worker_loop(
     spec: _WorkerSpec, out: Any, stop: Event, terminated: list[bool], parent: Any, budget: Budget
 ) -> None:
-    from twisted.sim import RopeSim, sample_curve
+    from twisted.proposals import propose_curve
+    from twisted.sim import RopeSim
 
     options = spec.options
     rng = np.random.default_rng(spec.seed)
     sim = RopeSim(options.friction_scale)
     store = open_store(spec.url, create=False, upgrade=False)
     dq = DQIndex(options.max_cross, options.cross_bias)
-    cache: dict[int, tuple[np.ndarray, int, int]] = {}
+    cache: dict[int, tuple[np.ndarray, int, int, np.ndarray]] = {}
 
     def refresh() -> None:
         with store.session() as session:
             dq.add(*configuration_index(session, after_id=dq.last_id, kind=RUN_KIND))
 
-    def load(config_id: int) -> tuple[np.ndarray, int, int]:
+    def load(config_id: int) -> tuple[np.ndarray, int, int, np.ndarray]:
         if config_id not in cache:
             if len(cache) > 4096:
                 cache.clear()
             with store.session() as session:
                 row = session.execute(
-                    select(Configuration.q, Configuration.state_id, Configuration.cross).where(
-                        Configuration.id == config_id
-                    )
+                    select(
+                        Configuration.q, Configuration.state_id, Configuration.cross, Configuration.points
+                    ).where(Configuration.id == config_id)
                 ).one()
-            cache[config_id] = (np.frombuffer(row[0], dtype="<f8").astype(np.float64), row[1], row[2])
+            q, points = (np.frombuffer(b, dtype="<f8").astype(np.float64) for b in (row[0], row[3]))
+            cache[config_id] = (q, row[1], row[2], points.reshape(-1, 3))
         return cache[config_id]
 
     seq = 0
@@ -425,8 +433,8 @@ def _worker_loop(
             if not budget.claim_try():
                 break
             config_id = dq.sample(rng)
-            q, state_id, cross = load(config_id)
-            curve = sample_curve(rng)
+            q, state_id, cross, points = load(config_id)
+            curve = propose_curve(rng, points, options.across_share)
             started = time.perf_counter()
             sim.set_state(q)
             outcome = sim.apply(curve)

@@ -216,7 +216,7 @@ class CollectWorker:
         # create=False: a worker must never create an empty SQLite file where the database is missing
         self.store = open_store(url, create=False, upgrade=False)
         self.dq = DQIndex(options.max_cross, options.cross_bias)
-        self.cache: dict[int, tuple[np.ndarray, int, int]] = {}
+        self.cache: dict[int, tuple[np.ndarray, int, int, np.ndarray]] = {}
         self.last_refresh = -math.inf
 
     def location(self) -> tuple[str, int]:
@@ -228,23 +228,28 @@ class CollectWorker:
             self.dq.add(*configuration_index(session, after_id=self.dq.last_id, kind=RUN_KIND))
         self.last_refresh = time.monotonic()
 
-    def _load(self, config_id: int) -> tuple[np.ndarray, int, int]:
-        """(q, state id, crossing count) of a D_Q configuration, cached."""
+    def _load(self, config_id: int) -> tuple[np.ndarray, int, int, np.ndarray]:
+        """(q, state id, crossing count, link points) of a D_Q configuration, cached."""
         if config_id not in self.cache:
             if len(self.cache) > 4096:
                 self.cache.clear()
             with self.store.session() as session:
-                q, state_id, cross = session.execute(
-                    select(Configuration.q, Configuration.state_id, Configuration.cross).where(
-                        Configuration.id == config_id
-                    )
+                q, state_id, cross, points = session.execute(
+                    select(
+                        Configuration.q, Configuration.state_id, Configuration.cross, Configuration.points
+                    ).where(Configuration.id == config_id)
                 ).one()
-            self.cache[config_id] = (np.frombuffer(q, dtype="<f8").astype(np.float64), state_id, cross)
+            self.cache[config_id] = (
+                np.frombuffer(q, dtype="<f8").astype(np.float64),
+                state_id,
+                cross,
+                np.frombuffer(points, dtype="<f8").astype(np.float64).reshape(-1, 3),
+            )
         return self.cache[config_id]
 
     def run_batch(self, seq: int, seconds: float) -> BatchReport:
         """Simulate curves for up to ``seconds`` (or ``batch_size`` kept); commit or return the batch."""
-        from twisted.sim import sample_curve
+        from twisted.proposals import propose_curve
 
         started = time.monotonic()
         if started - self.last_refresh >= self.options.refresh_seconds or len(self.dq) == 0:
@@ -258,8 +263,8 @@ class CollectWorker:
         max_cross = self.options.max_cross
         while len(kept) < self.options.batch_size and time.monotonic() - started < seconds:
             config_id = self.dq.sample(rng)
-            q, state_id, cross = self._load(config_id)
-            curve = sample_curve(rng)
+            q, state_id, cross, points = self._load(config_id)
+            curve = propose_curve(rng, points, self.options.across_share)
             t0 = time.perf_counter()
             self.sim.set_state(q)
             outcome = self.sim.apply(curve)

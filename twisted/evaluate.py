@@ -8,9 +8,11 @@ the first thirds take the extra): ``easy`` (top), ``medium``, ``hard`` (bottom).
 3-crossing states the high level reaches from the empty rope (``moves.enumerate_states(3)``) that
 the data never visited. ``4`` holds 4-crossing states: those our data visited first (a rope has
 reached them, so they are physically feasible), topped up with states the high level reaches but
-the data never visited when fewer than ``per_set`` were visited; each goal's tag says which. From
-every pool ``per_set`` goals (10 in the paper) are drawn without replacement by one seeded
-generator, in the fixed order easy, medium, hard, unseen-3, 4, so a seed reproduces every set.
+the data never visited when fewer than ``per_set`` were visited; each goal's tag says which. ``5``
+holds 5-crossing states likewise: those our data visited, topped up with states one move beyond the
+goals of ``4``. From every pool ``per_set`` goals (10 in the paper) are drawn without replacement by
+one seeded generator, in the fixed order easy, medium, hard, unseen-3, 4, 5, so a seed reproduces
+every set.
 
 Evaluation. ``run_eval`` runs every (goal, seed) of a set with one planner in separate processes
 (``parallel`` at once, each planner with ``workers`` simulator processes, 1 = in-process) and stores
@@ -53,7 +55,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
 from twisted.goals import Goal, state_goal
-from twisted.moves import parse_state
+from twisted.moves import parse_state, successors
 from twisted.store.experiments import (
     FINISHED_STATUSES,
     DiscretisationResult,
@@ -106,7 +108,8 @@ __all__ = [
 DIFFICULTY_SETS = ("easy", "medium", "hard")
 UNSEEN_SET = "unseen-3"
 FOUR_SET = "4"
-ALL_MADE_SETS = (*DIFFICULTY_SETS, UNSEEN_SET, FOUR_SET)
+FIVE_SET = "5"
+ALL_MADE_SETS = (*DIFFICULTY_SETS, UNSEEN_SET, FOUR_SET, FIVE_SET)
 
 DISCRETE_STEP_Z_M = 0.001
 DISCRETE_STEP_XY_M = 0.01
@@ -205,7 +208,7 @@ def make_problem_sets(
     picked = _sample(unseen, per_set, rng)
     if UNSEEN_SET in wanted:
         out[UNSEEN_SET] = records(picked, _constant("unseen"), all3)
-    if FOUR_SET in wanted:
+    if FOUR_SET in wanted or FIVE_SET in wanted:  # 5 is drawn after 4, so 4 is drawn for it too
         four_visited = sorted(k for k, (p, _) in visited.items() if p.cross == 4)
         picked = _sample(four_visited, per_set, rng)
         pool = {k: visited[k][0] for k in picked}
@@ -214,7 +217,21 @@ def make_problem_sets(
             extra = _sample(sorted(k for k in all4 if k not in visited), per_set - len(picked), rng)
             pool.update({k: all4[k] for k in extra})
             picked += extra
-        out[FOUR_SET] = records(picked, lambda k: "4-visited" if k in visited else "4-unseen", pool)
+        four = records(picked, lambda k: "4-visited" if k in visited else "4-unseen", pool)
+        if FOUR_SET in wanted:
+            out[FOUR_SET] = four
+    if FIVE_SET in wanted:
+        # visited 5-crossing states first, topped up with states one move beyond the 4-crossing goals
+        # (enumerating all 130,304 five-crossing states takes half a minute)
+        five_visited = sorted(k for k, (p, _) in visited.items() if p.cross == 5)
+        picked = _sample(five_visited, per_set, rng)
+        pool = {k: visited[k][0] for k in picked}
+        if len(picked) < per_set:
+            beyond = {s.state.key: s.state for r in four for s in successors(r.p_data) if s.state.cross == 5}
+            extra = _sample(sorted(k for k in beyond if k not in visited), per_set - len(picked), rng)
+            pool.update({k: beyond[k] for k in extra})
+            picked += extra
+        out[FIVE_SET] = records(picked, lambda k: "5-visited" if k in visited else "5-unseen", pool)
     return out
 
 

@@ -732,7 +732,8 @@ class Twisted:
 
 
 class ModelCurves:
-    """Curves from the learned inverse model, conditioned on the rope's points and the next state."""
+    """Curves from the learned inverse model, conditioned on the rope's points, the next state and
+    the plan's move to it."""
 
     name = "model"
 
@@ -742,7 +743,9 @@ class ModelCurves:
     def sample(
         self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
     ) -> list[Any]:
-        return list(self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data))
+        return list(
+            self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move)
+        )
 
 
 class PlanInputError(ValueError):

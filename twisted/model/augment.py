@@ -8,7 +8,9 @@
   stays the same because the gripper moves the same physical link the same way.
 
 The point/curve functions work on numpy arrays and torch tensors alike (last axis = coordinates,
-the point axis second to last). :data:`VARIANTS` numbers the four combinations so that a batch
+the point axis second to last). :func:`mirror_move` / :func:`reverse_move` transform an abstract
+move (:class:`twisted.moves.Move`) so that it makes the transformed state from the transformed
+start. :data:`VARIANTS` numbers the four combinations so that a batch
 can pick one per sample: bit 0 = mirror, bit 1 = reverse (they commute).
 
 :func:`mirror_state` / :func:`reverse_state` apply the same symmetries to a simulator state, so
@@ -17,12 +19,14 @@ that the tests can check the augmentations against physics.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
 import torch
 
+from twisted.moves import Move
 from twisted.sim import N_LINKS, RopeSim
 from twisted.sim.mjcf import joint_names
 from twisted.topology import PData
@@ -30,12 +34,15 @@ from twisted.topology import PData
 __all__ = [
     "VARIANTS",
     "apply_variant",
+    "apply_variant_move",
     "apply_variant_p_data",
     "mirror_curve",
+    "mirror_move",
     "mirror_p_data",
     "mirror_points",
     "mirror_state",
     "reverse_curve",
+    "reverse_move",
     "reverse_p_data",
     "reverse_points",
     "reverse_state",
@@ -93,6 +100,67 @@ def apply_variant_p_data(p: PData, variant: int) -> PData:
     if variant & REVERSE:
         p = p.reverse()
     return p
+
+
+def _other(side: str | None) -> str | None:
+    return None if side is None else ("R" if side == "L" else "L")
+
+
+def _other_sign(sign: str | None) -> str | None:
+    return None if sign is None else ("-" if sign == "+" else "+")
+
+
+def mirror_move(move: Move) -> Move:
+    """The move that makes the mirrored state from the mirrored start: sides and signs flip,
+    segments and over/under are kept (a reflection of the table keeps which strand is on top)."""
+    return replace(
+        move, side=_other(move.side), other_side=_other(move.other_side), sign=_other_sign(move.sign)
+    )
+
+
+def reverse_move(move: Move, p_from: PData) -> Move:
+    """The move that makes the reversed state from the reversed start ``p_from.reverse()``.
+
+    Segments renumber k -> 2n - k and every side flips (the rope is walked the other way); signs
+    are kept. R1: the curl's first visit is the old second one, so over/under flips. R2: the piece
+    met first is now the old second piece (its over/under), and its first new visit is the old
+    second crossing when the pieces ran parallel (sides differ: the sign flips) and the old first
+    one when nested (sides agree: the sign is kept). Cross: the head's tip becomes the tail's.
+    """
+    last = 2 * p_from.cross
+    if move.kind == "R1":
+        return replace(move, segment=last - move.segment, side=_other(move.side), over=_flip_over(move.over))
+    if move.kind == "R2":
+        assert move.other_segment is not None
+        return Move(
+            "R2",
+            last - move.other_segment,
+            side=_other(move.other_side),
+            sign=move.sign if move.side == move.other_side else _other_sign(move.sign),
+            over=_flip_over(move.over),
+            other_segment=last - move.segment,
+            other_side=_other(move.side),
+        )
+    assert move.other_segment is not None
+    return replace(
+        move,
+        segment=last - move.segment,
+        other_segment=last - move.other_segment,
+        other_side=_other(move.other_side),
+    )
+
+
+def _flip_over(over: str | None) -> str | None:
+    return None if over is None else ("U" if over == "O" else "O")
+
+
+def apply_variant_move(move: Move, p_from: PData, variant: int) -> Move:
+    """``move`` (from state ``p_from``) under variant 0..3, in the order of :func:`apply_variant_p_data`."""
+    if variant & MIRROR:
+        move, p_from = mirror_move(move), p_from.mirror()
+    if variant & REVERSE:
+        move = reverse_move(move, p_from)
+    return move
 
 
 def apply_variant(

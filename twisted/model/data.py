@@ -1,11 +1,23 @@
 """Training data of the inverse model, read from the store once, in chunks.
 
-Every kept transition (``Cross(s') > Cross(s)``: +1 and +2 crossing steps alike) becomes one
-sample: the start configuration's link points, the curve, and the indices of the start and next
+Two sources of samples (:data:`SOURCES`):
+
+* ``collect``: every kept transition (``Cross(s') > Cross(s)``: +1 and +2 crossing steps alike);
+* ``search``: every edge of the planner trees ``T`` in ``search_nodes`` that adds crossings: the
+  parent node's configuration, the curve, and the state the child reached. Each reached state is a
+  goal this curve achieves (hindsight), with exactly the planner's distribution of configurations.
+
+A sample is the start configuration's link points, the curve, and the indices of the start and next
 P-data states. States are few, so each distinct state is encoded once, in the four symmetry
 variants (identity, mirror, reverse, both: :mod:`twisted.model.augment`), and a batch picks the
-variant per sample. The train/validation split hashes the START configuration id with the seed,
-so validation never contains a start configuration seen in training.
+variant per sample; so is each distinct (start, next) pair: where the new visits land and the move
+that makes the step (the first in :func:`twisted.moves.successors` order, :func:`twisted.moves.explains`,
+in each variant's own frame: the planner passes the first move of its plans, so training labels match
+what inference is given). The train/validation split hashes the START configuration with the seed,
+so validation never contains a start configuration seen in training: a transition's start is its
+``from_configuration_id``; a tree edge's is its parent node (key ``-node id``), except that an edge
+from a tree's root takes the run's start configuration (the D_Q straight rope for runs from it), so
+that both sources put one configuration on one side.
 """
 
 from __future__ import annotations
@@ -17,26 +29,43 @@ import numpy as np
 import numpy.typing as npt
 import torch
 from sqlalchemy import func, select
+from sqlalchemy.orm import Session, aliased
 
 from twisted.model.augment import VARIANTS, apply_variant_p_data
-from twisted.model.encoding import MAX_CROSSINGS, NEW_DIM, P_DATA_DIM, encode_new_visits, encode_p_data
+from twisted.model.encoding import (
+    MAX_CROSSINGS,
+    MOVE_DIM,
+    NEW_DIM,
+    P_DATA_DIM,
+    encode_move,
+    encode_new_visits,
+    encode_p_data,
+)
+from twisted.moves import explains
 from twisted.sim import N_POINTS
 from twisted.store.db import Store
-from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
+from twisted.store.models import Configuration, Run, TopologicalState, Transition, blob_to_array
+from twisted.store.search import SearchNode, SearchRunRow
 from twisted.topology import PData, parse_p_data
 
 __all__ = [
     "NoTrainingDataError",
+    "SOURCES",
     "TransitionData",
     "encode_pairs",
     "encode_states",
+    "load_samples",
     "load_transitions",
+    "load_tree_edges",
+    "max_search_node_id",
     "max_transition_id",
     "split_by_start",
     "transitions_from_samples",
 ]
 
 CHUNK_SIZE = 4096
+SOURCES = ("collect", "search")
+COLLECT, SEARCH = 0, 1
 
 
 class NoTrainingDataError(RuntimeError):
@@ -45,10 +74,13 @@ class NoTrainingDataError(RuntimeError):
 
 @dataclass
 class TransitionData:
-    """Samples as tensors; ``from_state``/``to_state`` index ``state_enc`` (S, 4 variants, P_DATA_DIM)."""
+    """Samples as tensors; ``from_state``/``to_state`` index ``state_enc`` (S, 4 variants, P_DATA_DIM).
+
+    ``transition_ids`` are transition ids for ``source`` 0 (collect) and search node ids for 1 (search).
+    """
 
     transition_ids: npt.NDArray[np.int64]
-    start_ids: npt.NDArray[np.int64]  # from_configuration_id
+    start_ids: npt.NDArray[np.int64]  # the split key: the start configuration (see the module docstring)
     from_cross: npt.NDArray[np.int64]
     to_cross: npt.NDArray[np.int64]
     points: torch.Tensor  # (N, 22, 3) world frame, metres
@@ -59,9 +91,16 @@ class TransitionData:
     state_keys: list[str]
     pair: torch.Tensor  # (N,) long: index of (from_state, to_state) in pair_enc
     pair_enc: torch.Tensor  # (P, 4, NEW_DIM): where the new visits land, per symmetry variant
+    move_enc: torch.Tensor  # (P, 4, MOVE_DIM): the move that makes the step, per symmetry variant
+    source: npt.NDArray[np.int64]  # index into SOURCES
 
     def __len__(self) -> int:
         return len(self.transition_ids)
+
+    def count_by_source(self) -> dict[str, int]:
+        """Samples per source name."""
+        counts = np.bincount(self.source, minlength=len(SOURCES))
+        return {name: int(counts[i]) for i, name in enumerate(SOURCES)}
 
     def subset(self, index: npt.NDArray[np.int64]) -> TransitionData:
         t = torch.as_tensor(index, dtype=torch.long)
@@ -78,6 +117,8 @@ class TransitionData:
             state_keys=self.state_keys,
             pair=self.pair[t],
             pair_enc=self.pair_enc,
+            move_enc=self.move_enc,
+            source=self.source[index],
         )
 
     def to(self, device: torch.device | str) -> TransitionData:
@@ -90,6 +131,7 @@ class TransitionData:
             state_enc=self.state_enc.to(device),
             pair=self.pair.to(device),
             pair_enc=self.pair_enc.to(device),
+            move_enc=self.move_enc.to(device),
         )
 
 
@@ -104,6 +146,53 @@ def max_transition_id(store: Store) -> int | None:
         return session.scalar(select(func.max(Transition.id)).where(*_usable()))
 
 
+@dataclass
+class _Rows:
+    """Samples as read from the store, before the states are encoded."""
+
+    ids: npt.NDArray[np.int64]
+    start_ids: npt.NDArray[np.int64]
+    from_cross: npt.NDArray[np.int64]
+    to_cross: npt.NDArray[np.int64]
+    state_db_ids: npt.NDArray[np.int64]  # (N, 2) topological_states ids of (from, to)
+    curves: npt.NDArray[np.float32]
+    points: npt.NDArray[np.float32]
+    source: int
+
+    @classmethod
+    def empty(cls, n: int, source: int) -> _Rows:
+        return cls(
+            np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64),
+            np.empty((n, 2), dtype=np.int64),
+            np.empty((n, 4), dtype=np.float32),
+            np.empty((n, N_POINTS, 3), dtype=np.float32),
+            source,
+        )
+
+    def head(self, n: int) -> _Rows:
+        return _Rows(
+            self.ids[:n],
+            self.start_ids[:n],
+            self.from_cross[:n],
+            self.to_cross[:n],
+            self.state_db_ids[:n],
+            self.curves[:n],
+            self.points[:n],
+            self.source,
+        )
+
+
+def _no_data(store: Store, sources: Sequence[str]) -> NoTrainingDataError:
+    what = " or ".join({"collect": "transitions", "search": "planner tree edges"}[s] for s in sources)
+    return NoTrainingDataError(
+        f"the database {store.url.render_as_string(hide_password=True)} holds no {what} that add crossings: "
+        "collect first (`twisted collect`), then train"
+    )
+
+
 def load_transitions(
     store: Store,
     *,
@@ -116,54 +205,38 @@ def load_transitions(
     Arrays are allocated once from a COUNT and filled chunk by chunk, so the rows are never held
     twice. Raises :class:`NoTrainingDataError` when there is nothing to train on.
     """
-    where = _usable() + ([Transition.id <= max_id] if max_id is not None else [])
+    return load_samples(store, ("collect",), max_id=max_id, chunk_size=chunk_size, progress=progress)
+
+
+def load_tree_edges(store: Store, *, max_node_id: int | None = None) -> TransitionData:
+    """Every planner tree edge adding crossings (up to :data:`MAX_CROSSINGS`), node id <= ``max_node_id``."""
+    return load_samples(store, ("search",), max_node_id=max_node_id)
+
+
+def load_samples(
+    store: Store,
+    sources: Sequence[str] = ("collect",),
+    *,
+    max_id: int | None = None,
+    max_node_id: int | None = None,
+    chunk_size: int = CHUNK_SIZE,
+    progress: Callable[[int, int], None] | None = None,
+) -> TransitionData:
+    """Samples of the given :data:`SOURCES`: transitions up to ``max_id``, tree edges up to
+    ``max_node_id`` (None: all). Raises :class:`NoTrainingDataError` when there are none."""
+    unknown = [s for s in sources if s not in SOURCES]
+    if unknown or not sources:
+        raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(sources) or 'none'}")
+    parts: list[_Rows] = []
     with store.session() as session:
-        n = int(session.scalar(select(func.count()).select_from(Transition).where(*where)) or 0)
+        if "collect" in sources:
+            parts.append(_read_transitions(session, max_id, chunk_size, progress))
+        if "search" in sources:
+            parts.append(_read_tree_edges(session, max_node_id))
+        n = sum(len(p.ids) for p in parts)
         if n == 0:
-            raise NoTrainingDataError(
-                f"the database {store.url.render_as_string(hide_password=True)} holds no transitions that "
-                "add crossings: collect first (`twisted collect`), then train"
-            )
-        ids = np.empty(n, dtype=np.int64)
-        start_ids = np.empty(n, dtype=np.int64)
-        from_cross = np.empty(n, dtype=np.int64)
-        to_cross = np.empty(n, dtype=np.int64)
-        state_db_ids = np.empty((n, 2), dtype=np.int64)
-        curves = np.empty((n, 4), dtype=np.float32)
-        points = np.empty((n, N_POINTS, 3), dtype=np.float32)
-        stmt = (
-            select(
-                Transition.id,
-                Transition.from_configuration_id,
-                Transition.from_cross,
-                Transition.to_cross,
-                Transition.from_state_id,
-                Transition.to_state_id,
-                Transition.link,
-                Transition.z_max_m,
-                Transition.x_m,
-                Transition.y_m,
-                Configuration.points,
-            )
-            .join(Configuration, Configuration.id == Transition.from_configuration_id)
-            .where(*where)
-            .order_by(Transition.id)
-            .execution_options(yield_per=chunk_size)
-        )
-        i = 0
-        for partition in session.execute(stmt).partitions():
-            # rows committed after the COUNT (a collector is running, max_id None) are not ours
-            for row in partition[: n - i]:
-                ids[i], start_ids[i], from_cross[i], to_cross[i], state_db_ids[i, 0], state_db_ids[i, 1] = (
-                    row[:6]
-                )
-                curves[i] = row[6:10]
-                points[i] = blob_to_array(row[10], (N_POINTS, 3))
-                i += 1
-            if progress is not None:
-                progress(i, n)
-        ids, start_ids, from_cross, to_cross = ids[:i], start_ids[:i], from_cross[:i], to_cross[:i]
-        state_db_ids, curves, points = state_db_ids[:i], curves[:i], points[:i]
+            raise _no_data(store, sources)
+        state_db_ids = np.concatenate([p.state_db_ids for p in parts])
         unique_states, inverse = np.unique(state_db_ids.reshape(-1), return_inverse=True)
         rows = session.execute(
             select(TopologicalState.id, TopologicalState.p_data).where(
@@ -172,23 +245,127 @@ def load_transitions(
         ).all()
     p_by_id = {sid: parse_p_data(p) for sid, p in rows}
     states = [p_by_id[sid] for sid in unique_states.tolist()]
-    state_enc = encode_states(states)
     inverse = inverse.reshape(-1, 2)
-    pair, pair_enc = encode_pairs(inverse, states)
+    pair, pair_enc, move_enc = encode_pairs(inverse, states)
     return TransitionData(
-        transition_ids=ids,
-        start_ids=start_ids,
-        from_cross=from_cross,
-        to_cross=to_cross,
-        points=torch.from_numpy(points),
-        curves=torch.from_numpy(curves),
+        transition_ids=np.concatenate([p.ids for p in parts]),
+        start_ids=np.concatenate([p.start_ids for p in parts]),
+        from_cross=np.concatenate([p.from_cross for p in parts]),
+        to_cross=np.concatenate([p.to_cross for p in parts]),
+        points=torch.from_numpy(np.concatenate([p.points for p in parts])),
+        curves=torch.from_numpy(np.concatenate([p.curves for p in parts])),
         from_state=torch.as_tensor(inverse[:, 0], dtype=torch.long),
         to_state=torch.as_tensor(inverse[:, 1], dtype=torch.long),
-        state_enc=state_enc,
+        state_enc=encode_states(states),
         state_keys=[p.key for p in states],
         pair=pair,
         pair_enc=pair_enc,
+        move_enc=move_enc,
+        source=np.concatenate([np.full(len(p.ids), p.source, dtype=np.int64) for p in parts]),
     )
+
+
+def _read_transitions(
+    session: Session, max_id: int | None, chunk_size: int, progress: Callable[[int, int], None] | None
+) -> _Rows:
+    where = _usable() + ([Transition.id <= max_id] if max_id is not None else [])
+    n = int(session.scalar(select(func.count()).select_from(Transition).where(*where)) or 0)
+    out = _Rows.empty(n, COLLECT)
+    if n == 0:
+        return out
+    stmt = (
+        select(
+            Transition.id,
+            Transition.from_configuration_id,
+            Transition.from_cross,
+            Transition.to_cross,
+            Transition.from_state_id,
+            Transition.to_state_id,
+            Transition.link,
+            Transition.z_max_m,
+            Transition.x_m,
+            Transition.y_m,
+            Configuration.points,
+        )
+        .join(Configuration, Configuration.id == Transition.from_configuration_id)
+        .where(*where)
+        .order_by(Transition.id)
+        .execution_options(yield_per=chunk_size)
+    )
+    i = 0
+    for partition in session.execute(stmt).partitions():
+        # rows committed after the COUNT (a collector is running, max_id None) are not ours
+        for row in partition[: n - i]:
+            out.ids[i], out.start_ids[i], out.from_cross[i], out.to_cross[i] = row[:4]
+            out.state_db_ids[i] = row[4:6]
+            out.curves[i] = row[6:10]
+            out.points[i] = blob_to_array(row[10], (N_POINTS, 3))
+            i += 1
+        if progress is not None:
+            progress(i, n)
+    return out.head(i)
+
+
+def _straight_rope_configuration(session: Session) -> int:
+    """The D_Q configuration of the straight rope (the collect root), 0 when there is none."""
+    found = session.scalar(
+        select(func.min(Configuration.id))
+        .join(Run, Run.id == Configuration.run_id)
+        .where(Run.kind == "collect", Configuration.cross == 0)
+    )
+    return int(found or 0)
+
+
+def _read_tree_edges(session: Session, max_node_id: int | None) -> _Rows:
+    parent = aliased(SearchNode)
+    where = [
+        SearchNode.parent_id.is_not(None),
+        SearchNode.link.is_not(None),
+        SearchNode.cross > parent.cross,
+        SearchNode.cross <= MAX_CROSSINGS,
+    ] + ([SearchNode.id <= max_node_id] if max_node_id is not None else [])
+    stmt = (
+        select(
+            SearchNode.id,
+            parent.id,
+            parent.seq,
+            SearchRunRow.start_configuration_id,
+            parent.cross,
+            SearchNode.cross,
+            parent.state_id,
+            SearchNode.state_id,
+            SearchNode.link,
+            SearchNode.z_max_m,
+            SearchNode.x_m,
+            SearchNode.y_m,
+            parent.points,
+        )
+        .join(parent, parent.id == SearchNode.parent_id)
+        .join(SearchRunRow, SearchRunRow.run_id == SearchNode.run_id)
+        .where(*where)
+        .order_by(SearchNode.id)
+    )
+    rows = session.execute(stmt).all()
+    out = _Rows.empty(len(rows), SEARCH)
+    straight = _straight_rope_configuration(session)
+    for i, row in enumerate(rows):
+        node_id, parent_id, parent_seq, run_start = row[:4]
+        out.ids[i] = node_id
+        if parent_seq == 0:
+            out.start_ids[i] = run_start if run_start is not None else straight
+        else:
+            out.start_ids[i] = -parent_id
+        out.from_cross[i], out.to_cross[i] = row[4:6]
+        out.state_db_ids[i] = row[6:8]
+        out.curves[i] = row[8:12]
+        out.points[i] = blob_to_array(row[12], (N_POINTS, 3))
+    return out
+
+
+def max_search_node_id(store: Store) -> int | None:
+    """The newest search node id (the tree snapshot a training run reads), None if there is none."""
+    with store.session() as session:
+        return session.scalar(select(func.max(SearchNode.id)))
 
 
 def encode_states(states: Sequence[PData]) -> torch.Tensor:
@@ -200,17 +377,25 @@ def encode_states(states: Sequence[PData]) -> torch.Tensor:
     return torch.from_numpy(out)
 
 
-def encode_pairs(index: npt.NDArray[np.int64], states: Sequence[PData]) -> tuple[torch.Tensor, torch.Tensor]:
-    """For (N, 2) (from, to) state indices: (N,) pair index and (P, 4, NEW_DIM) new-visit encodings
-    of every distinct pair in the four symmetry variants."""
-    unique, inverse = np.unique(index, axis=0, return_inverse=True)
-    out = np.empty((len(unique), len(VARIANTS), NEW_DIM), dtype=np.float32)
+def encode_pairs(
+    index: npt.NDArray[np.int64], states: Sequence[PData]
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """For (N, 2) (from, to) state indices: (N,) pair index, and the (P, 4, NEW_DIM) new-visit and
+    (P, 4, MOVE_DIM) move encodings of every distinct pair in the four symmetry variants (the move:
+    :func:`twisted.moves.explains` of the transformed pair; zeros when no single move makes it)."""
+    unique, inverse = np.unique(index.reshape(-1, 2), axis=0, return_inverse=True)
+    new = np.empty((len(unique), len(VARIANTS), NEW_DIM), dtype=np.float32)
+    moves = np.empty((len(unique), len(VARIANTS), MOVE_DIM), dtype=np.float32)
     for k, (a, b) in enumerate(unique.tolist()):
         for v in range(len(VARIANTS)):
-            out[k, v] = encode_new_visits(
-                apply_variant_p_data(states[a], v), apply_variant_p_data(states[b], v)
-            )
-    return torch.as_tensor(inverse.reshape(-1), dtype=torch.long), torch.from_numpy(out)
+            p_from, p_to = apply_variant_p_data(states[a], v), apply_variant_p_data(states[b], v)
+            new[k, v] = encode_new_visits(p_from, p_to)
+            moves[k, v] = encode_move(explains(p_from, p_to))
+    return (
+        torch.as_tensor(inverse.reshape(-1), dtype=torch.long),
+        torch.from_numpy(new),
+        torch.from_numpy(moves),
+    )
 
 
 def transitions_from_samples(
@@ -232,7 +417,7 @@ def transitions_from_samples(
             index[i, j] = keys[p.key]
     n = len(p_from)
     ids = np.arange(n, dtype=np.int64)
-    pair, pair_enc = encode_pairs(index, states)
+    pair, pair_enc, move_enc = encode_pairs(index, states)
     return TransitionData(
         transition_ids=ids,
         start_ids=ids.copy() if start_ids is None else np.asarray(start_ids, dtype=np.int64),
@@ -246,6 +431,8 @@ def transitions_from_samples(
         state_keys=[p.key for p in states],
         pair=pair,
         pair_enc=pair_enc,
+        move_enc=move_enc,
+        source=np.full(n, COLLECT, dtype=np.int64),
     )
 
 

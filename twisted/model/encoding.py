@@ -8,6 +8,9 @@
   and rotations about the vertical, so the model never has to learn them; the price is that the
   action's planar displacement must be expressed in the same frame (:func:`curve_to_target`) and
   rotated back at inference (:func:`target_to_curve`).
+* :func:`encode_move` turns the abstract move (R1 / R2 / Cross, its segments, sides, over/under
+  and sign, :class:`twisted.moves.Move`) into a vector, and :func:`move_link_features` marks the
+  links on the move's segments, so the link scorer sees where the new crossings are to appear.
 * The crossing features are computed from the points themselves (which segment crosses which,
   over or under, with which sign), so they stay consistent with any augmentation of the points.
 
@@ -25,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from twisted.moves import Move
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, N_POINTS
 from twisted.topology import PData, Visit
 
@@ -35,14 +39,20 @@ __all__ = [
     "LINK_TOKEN_DIM",
     "MAX_CROSSINGS",
     "MAX_VISITS",
+    "MOVE_DIM",
+    "MOVE_KINDS",
+    "MOVE_LINK_DIM",
     "NEW_DIM",
     "NEW_LINK_DIM",
     "P_DATA_DIM",
     "Preprocessed",
     "curve_to_target",
     "curve_valid",
+    "encode_move",
     "encode_new_visits",
     "encode_p_data",
+    "link_segments",
+    "move_link_features",
     "new_visit_link_features",
     "new_visits",
     "preprocess",
@@ -157,8 +167,7 @@ def new_visit_link_features(pre: Preprocessed, new: torch.Tensor) -> torch.Tenso
 
     A link's segment is the number of current crossing visits before its middle along the rope.
     """
-    mids = torch.arange(N_LINKS, dtype=pre.visit_arcs.dtype, device=pre.visit_arcs.device) + 0.5
-    link_segment = (pre.visit_arcs[:, None, :] < mids[None, :, None]).sum(dim=2)  # (B, 21); inf never counts
+    link_segment = link_segments(pre)
     slots = new[:, 1:].reshape(len(new), MAX_NEW_VISITS, NEW_VISIT_DIM)
     present = slots[..., 0]
     segment = slots[..., 1 : 1 + N_STATE_SEGMENTS].argmax(dim=2)
@@ -166,6 +175,64 @@ def new_visit_link_features(pre: Preprocessed, new: torch.Tensor) -> torch.Tenso
     sign = slots[..., 2 + N_STATE_SEGMENTS]
     on = (link_segment[:, :, None] == segment[:, None, :]).to(new.dtype) * present[:, None, :]
     return torch.cat([on, on * over[:, None, :], on * sign[:, None, :]], dim=2)
+
+
+# ---- the abstract move that should take the rope to the next state -----------------------------
+
+MOVE_KINDS = ("R1", "R2", "Cross")
+# known flag, kind one-hot, segment one-hot, side, other segment one-hot, other side, over, sign
+MOVE_DIM = 1 + len(MOVE_KINDS) + 2 * N_STATE_SEGMENTS + 4
+MOVE_LINK_DIM = 4  # per link: on the move's segment, x its side, on its other segment, x that side
+
+
+def _side(side: str | None) -> float:
+    return 0.0 if side is None else (1.0 if side == "L" else -1.0)
+
+
+def encode_move(move: Move | None) -> npt.NDArray[np.float32]:
+    """(MOVE_DIM,) float32 of an R1 / R2 / Cross move (:class:`twisted.moves.Move`); zeros when None
+    (a transition no single move explains). Sides: L +1, R -1; over: O +1, U -1; sign +1 / -1."""
+    out = np.zeros(MOVE_DIM, dtype=np.float32)
+    if move is None:
+        return out
+    if not 0 <= move.segment < N_STATE_SEGMENTS or not (
+        move.other_segment is None or 0 <= move.other_segment < N_STATE_SEGMENTS
+    ):
+        raise EncodingError(f"move {move} starts from more than {MAX_CROSSINGS - 1} crossings")
+    out[0] = 1.0
+    out[1 + MOVE_KINDS.index(move.kind)] = 1.0
+    base = 1 + len(MOVE_KINDS)
+    out[base + move.segment] = 1.0
+    if move.other_segment is not None:
+        out[base + N_STATE_SEGMENTS + move.other_segment] = 1.0
+    tail = base + 2 * N_STATE_SEGMENTS
+    out[tail] = _side(move.side)
+    out[tail + 1] = _side(move.other_side)
+    out[tail + 2] = 0.0 if move.over is None else (1.0 if move.over == "O" else -1.0)
+    out[tail + 3] = 0.0 if move.sign is None else (1.0 if move.sign == "+" else -1.0)
+    return out
+
+
+def link_segments(pre: Preprocessed) -> torch.Tensor:
+    """(B, 21) long: the segment of the current state each link lies on (visits before its middle)."""
+    mids = torch.arange(N_LINKS, dtype=pre.visit_arcs.dtype, device=pre.visit_arcs.device) + 0.5
+    return (pre.visit_arcs[:, None, :] < mids[None, :, None]).sum(dim=2)  # inf never counts
+
+
+def move_link_features(pre: Preprocessed, move: torch.Tensor) -> torch.Tensor:
+    """(B, 21, MOVE_LINK_DIM): for each link, whether it lies on the move's segment (and that side),
+    and on its other segment (and that side): where the move says the new crossings go."""
+    base = 1 + len(MOVE_KINDS)
+    tail = base + 2 * N_STATE_SEGMENTS
+    segment = move[:, base : base + N_STATE_SEGMENTS].argmax(dim=1)
+    other = move[:, base + N_STATE_SEGMENTS : tail]
+    known, has_other = move[:, 0], other.sum(dim=1)
+    link_segment = link_segments(pre)
+    on = (link_segment == segment[:, None]).to(move.dtype) * known[:, None]
+    on_other = (link_segment == other.argmax(dim=1)[:, None]).to(move.dtype) * has_other[:, None]
+    return torch.stack(
+        [on, on * move[:, tail, None], on_other, on_other * move[:, tail + 1, None]], dim=2
+    )
 
 
 @dataclass

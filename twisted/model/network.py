@@ -1,9 +1,11 @@
 """The auto-regressive inverse model p(c | q, s') = p(link) p(z | link) p(x | link, z) p(y | link, z, x).
 
 Every factor is conditioned on a context vector computed from the configuration (canonical link
-points and their crossings, :mod:`twisted.model.encoding`), the CURRENT P-data, the NEXT P-data
-and, when the next state is the current one plus new crossings, the segments of the current rope
-where the new crossing visits land (:func:`twisted.model.encoding.new_visits`).
+points and their crossings, :mod:`twisted.model.encoding`), the CURRENT P-data, the NEXT P-data,
+when the next state is the current one plus new crossings the segments of the current rope where
+the new crossing visits land (:func:`twisted.model.encoding.new_visits`), and the abstract MOVE that
+makes the next state (R1 / R2 / Cross with its segments, sides, over/under and sign; the planner
+has it from the plan, training derives it from the transition with :func:`twisted.moves.explains`).
 
 ``link`` is categorical over the 21 links, scored by one small network shared by all links that
 reads the context and the link's own token (its place, direction, crossings, P-data visits on it,
@@ -33,18 +35,23 @@ from torch import nn
 from twisted.model.encoding import (
     GEOMETRY_DIM,
     LINK_TOKEN_DIM,
+    MOVE_DIM,
+    MOVE_LINK_DIM,
     NEW_DIM,
     NEW_LINK_DIM,
     P_DATA_DIM,
     Preprocessed,
     curve_to_target,
     curve_valid,
+    encode_move,
     encode_new_visits,
     encode_p_data,
+    move_link_features,
     new_visit_link_features,
     preprocess,
     target_to_curve,
 )
+from twisted.moves import Move, explains
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve
 from twisted.topology import PData, parse_p_data, top
 
@@ -75,12 +82,15 @@ class NetConfig:
     link_head: str = "pointer"
     # condition on where the next state's new crossing visits land on the current rope
     new_visits: bool = True
+    # condition on the abstract move (R1 / R2 / Cross, segments, sides, over/under, sign)
+    move: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> NetConfig:
+        d = {"move": False, **d}  # models stored before the move input had none
         return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 
@@ -130,14 +140,15 @@ class MixtureHead(nn.Module):
 @dataclass
 class Condition:
     """What a curve is conditioned on, besides the geometry: encoded current and next P-data
-    (B, P_DATA_DIM) and where the next state's new visits land (B, NEW_DIM)."""
+    (B, P_DATA_DIM), where the next state's new visits land (B, NEW_DIM) and the move (B, MOVE_DIM)."""
 
     p_now: torch.Tensor
     p_next: torch.Tensor
     new: torch.Tensor
+    move: torch.Tensor
 
     def expand(self, n: int) -> Condition:
-        return Condition(self.p_now.expand(n, -1), self.p_next.expand(n, -1), self.new.expand(n, -1))
+        return Condition(*(t.expand(n, -1) for t in (self.p_now, self.p_next, self.new, self.move)))
 
 
 class LinkScorer(nn.Module):
@@ -163,8 +174,9 @@ class InverseNet(nn.Module):
         super().__init__()
         self.config = config
         h = config.hidden
-        new_dim = NEW_DIM if config.new_visits else 0
+        new_dim = (NEW_DIM if config.new_visits else 0) + (MOVE_DIM if config.move else 0)
         self.token_dim = LINK_TOKEN_DIM + (NEW_LINK_DIM if config.new_visits else 0)
+        self.token_dim += MOVE_LINK_DIM if config.move else 0
         self.trunk = nn.Sequential(
             _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM + new_dim] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
         )
@@ -183,13 +195,18 @@ class InverseNet(nn.Module):
     def context(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
         """(B, hidden) context from the geometry and the condition."""
         parts = [pre.features, cond.p_now, cond.p_next] + ([cond.new] if self.config.new_visits else [])
+        parts += [cond.move] if self.config.move else []
         return self.trunk(torch.cat(parts, dim=1))
 
     def tokens(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
-        """(B, 21, token_dim): each link's geometry, and whether the next state's new visits land on it."""
-        if not self.config.new_visits:
-            return pre.link_tokens
-        return torch.cat([pre.link_tokens, new_visit_link_features(pre, cond.new)], dim=2)
+        """(B, 21, token_dim): each link's geometry, whether the next state's new visits land on it,
+        and whether it lies on the move's segments."""
+        parts = [pre.link_tokens]
+        if self.config.new_visits:
+            parts.append(new_visit_link_features(pre, cond.new))
+        if self.config.move:
+            parts.append(move_link_features(pre, cond.move))
+        return parts[0] if len(parts) == 1 else torch.cat(parts, dim=2)
 
     def _link_logits(self, ctx: torch.Tensor, tokens: torch.Tensor) -> torch.Tensor:
         if self.config.link_head == "pointer":
@@ -299,7 +316,7 @@ class InverseModel:
 
     def __post_init__(self) -> None:
         self.net.eval()
-        self._cache: dict[tuple[str, str], Condition] = {}
+        self._cache: dict[tuple[str, str, str | None], Condition] = {}
         sampling = self.metadata.get("sampling", {})
         if self.oversample is None:
             self.oversample = int(sampling.get("oversample", DEFAULT_OVERSAMPLE))
@@ -311,15 +328,19 @@ class InverseModel:
                 f"got {self.oversample} and {self.link_temperature}"
             )
 
-    def condition(self, p_now: PData, p_next: PData) -> Condition:
-        """The encoded condition (batch of one) for going from ``p_now`` to ``p_next`` (cached)."""
-        key = (p_now.key, p_next.key)
+    def condition(self, p_now: PData, p_next: PData, move: Move | None = None) -> Condition:
+        """The encoded condition (batch of one) for going from ``p_now`` to ``p_next`` by ``move``
+        (default: the first move that does it, :func:`twisted.moves.explains`, as in training); cached."""
+        key = (p_now.key, p_next.key, None if move is None else str(move))
         cond = self._cache.get(key)
         if cond is None:
+            if move is None and self.net.config.move:
+                move = explains(p_now, p_next)
             cond = Condition(
                 torch.from_numpy(encode_p_data(p_now))[None],
                 torch.from_numpy(encode_p_data(p_next))[None],
                 torch.from_numpy(encode_new_visits(p_now, p_next))[None],
+                torch.from_numpy(encode_move(move))[None],
             )
             if len(self._cache) > 100_000:
                 self._cache.clear()
@@ -336,12 +357,14 @@ class InverseModel:
         rng: np.random.Generator,
         *,
         p_data: PData | None = None,
+        move: Move | None = None,
     ) -> list[Curve]:
         """``n`` curves meant to take the rope at ``points`` (22, 3) to the state ``next_p_data``.
 
         ``q`` is accepted for the planner's contract but not read: the settled rope is described
         by its link points (capsules are symmetric about their axis; velocities are near zero).
-        ``p_data`` is the current state; computed with ``top(points)`` when omitted. Draws come
+        ``p_data`` is the current state; computed with ``top(points)`` when omitted. ``move`` is the
+        abstract move meant to make ``next_p_data`` (the plan's); by default the first that does. Draws come
         from a torch generator seeded from ``rng``, so a seeded ``rng`` replays the same curves.
         With ``oversample`` > 1 the n most likely of ``oversample * n`` draws are returned.
         """
@@ -351,7 +374,7 @@ class InverseModel:
         now = top(pts) if p_data is None else p_data
         assert self.oversample is not None and self.link_temperature is not None
         m = n * self.oversample
-        cond = self.condition(now, nxt).expand(m)
+        cond = self.condition(now, nxt, move).expand(m)
         pre = preprocess(pts)
         pre_m = Preprocessed(*(t.expand(m, *t.shape[1:]) for t in astuple_shallow(pre)))
         generator = torch.Generator().manual_seed(int(rng.integers(0, 2**63 - 1)))
@@ -363,12 +386,12 @@ class InverseModel:
 
     @torch.no_grad()
     def link_probabilities(
-        self, points: npt.ArrayLike, next_p_data: PData, p_data: PData | None = None
+        self, points: npt.ArrayLike, next_p_data: PData, p_data: PData | None = None, move: Move | None = None
     ) -> np.ndarray:
         """(21,) probability of each link being the one to grasp."""
         pts = np.asarray(points, dtype=np.float64)
         now = top(pts) if p_data is None else p_data
-        logits = self.net.link_logits(preprocess(pts), self.condition(now, parse_p_data(next_p_data)))
+        logits = self.net.link_logits(preprocess(pts), self.condition(now, parse_p_data(next_p_data), move))
         return torch.softmax(logits, dim=1)[0].numpy()
 
     def to_bytes(self) -> bytes:

@@ -151,9 +151,9 @@ def success_at_k(
     random_curves: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, StepResult]:
-    """Simulate ``k`` model curves and ``random_curves`` (default ``k``, at least ``k``) random curves
-    per transition; solved = any of the k reaches ``p_to`` (the first k random curves for random)."""
-    r = max(k, random_curves or k)
+    """Simulate ``k`` model curves and ``random_curves`` (default ``k``, at least ``k``; 0: none) random
+    curves per transition; solved = any of the k reaches ``p_to`` (the first k random curves for random)."""
+    r = 0 if random_curves == 0 else max(k, random_curves or k)
     jobs: list[tuple[npt.NDArray[np.float64], Curve]] = []
     for t in transitions:
         jobs += [(t.q, c) for c in model.sample(t.points, t.q, t.p_to, k, rng, p_data=t.p_from)]
@@ -170,7 +170,8 @@ def success_at_k(
         step = out.setdefault(t.step, StepResult(t.step, random_curves=r))
         step.n += 1
         step.solved_model += any(hit[:k])
-        step.solved_random += any(hit[k : 2 * k])
-        p = sum(hit[k:]) / r
-        step.random_expected_sum += 1.0 - (1.0 - p) ** k
+        if r:
+            step.solved_random += any(hit[k : 2 * k])
+            p = sum(hit[k:]) / r
+            step.random_expected_sum += 1.0 - (1.0 - p) ** k
     return out

@@ -20,7 +20,7 @@ import shlex
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -29,9 +29,12 @@ from sqlalchemy import delete, select
 
 from twisted.model.augment import VARIANTS, apply_variant
 from twisted.model.data import (
+    SOURCES,
     NoTrainingDataError,
     TransitionData,
+    load_samples,
     load_transitions,
+    max_search_node_id,
     max_transition_id,
     split_by_start,
 )
@@ -67,16 +70,22 @@ class TrainConfig:
     augment: bool = True
     checkpoint_every_s: float = 30.0
     net: NetConfig = field(default_factory=NetConfig)
+    # where the samples come from (twisted.model.data.SOURCES): collected transitions, planner trees
+    sources: tuple[str, ...] = ("collect",)
+    # the tree snapshot (newest search node id) of a run that reads "search"; set when it starts
+    max_search_node_id: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["net"] = self.net.to_dict()
+        d["sources"] = list(self.sources)
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         d = dict(d)
         net = NetConfig.from_dict(d.pop("net", {}))
+        d["sources"] = tuple(d.get("sources", ("collect",)))
         return cls(net=net, **{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 
@@ -207,6 +216,7 @@ def batch_condition(data: TransitionData, index: torch.Tensor, variant: torch.Te
         p_now=data.state_enc[data.from_state[index], variant],
         p_next=data.state_enc[data.to_state[index], variant],
         new=data.pair_enc[data.pair[index], variant],
+        move=data.move_enc[data.pair[index], variant],
     )
 
 
@@ -351,12 +361,16 @@ def train(
         say(f"resuming training run {run_id} (epoch {run.epochs_done}, {run.elapsed_s:.0f} s done)")
     else:
         config = config or TrainConfig()
-        found = max_transition_id(store)
-        if found is None:
+        unknown = [s for s in config.sources if s not in SOURCES]
+        if unknown or not config.sources:
+            raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(config.sources)}")
+        found = max_transition_id(store) if "collect" in config.sources else None
+        if "search" in config.sources:
+            config = replace(config, max_search_node_id=max_search_node_id(store) or 0)
+        if found is None and "search" not in config.sources:
             # load_transitions raises the actionable "collect first" error
             load_transitions(store, max_id=0)
-        assert found is not None
-        max_id = found
+        max_id = found or 0
         history = []
         with store.session(write=True) as session:
             run = TrainingRun(
@@ -375,15 +389,23 @@ def train(
             session.flush()
             run_id = run.id
 
-    data = load_transitions(store, max_id=max_id)
+    data = load_samples(store, config.sources, max_id=max_id, max_node_id=config.max_search_node_id)
     train_idx, val_idx = split_by_start(data.start_ids, config.val_fraction, config.seed)
     train_data, val_data = data.subset(train_idx), data.subset(val_idx)
     del data
+    by_source = {
+        **{f"n_train_{k}": v for k, v in train_data.count_by_source().items()},
+        **{f"n_val_{k}": v for k, v in val_data.count_by_source().items()},
+    }
     with store.session(write=True) as session:
         row = session.get(TrainingRun, run_id)
         assert row is not None
         row.n_train, row.n_val, row.status = len(train_data), len(val_data), "running"
-    say(f"training run {run_id}: {len(train_data)} training / {len(val_data)} validation transitions")
+    say(
+        f"training run {run_id}: {len(train_data)} training / {len(val_data)} validation samples ("
+        + ", ".join(f"{k} {v}" for k, v in by_source.items())
+        + ")"
+    )
 
     trainer = Trainer(train_data, config, device)
     elapsed_before = 0.0
@@ -478,6 +500,7 @@ def train(
             "best_epoch": trainer.best_epoch,
             "elapsed_s": round(elapsed(), 1),
             "n_train": len(train_data),
+            **by_source,
         }
     )
     net = trainer.net.to("cpu")
@@ -486,6 +509,7 @@ def train(
         metadata={
             "training_run_id": run_id,
             "data_size": len(train_data),
+            "data_sources": train_data.count_by_source(),
             "n_val": len(val_data),
             "max_transition_id": max_id,
             "metrics": metrics,
