@@ -279,7 +279,7 @@ def database_urls(backend: str, workdir: Path) -> tuple[list[str], Any]:
         return [f"sqlite:///{workdir / 'soak.db'}", f"sqlite:///{workdir / 'reference.db'}"], None
     from tests.postgres_server import PostgresServer
 
-    server = PostgresServer(workdir / "pg")
+    server = PostgresServer()  # its own temporary folder (the server runs as another user)
     server.__enter__()
     admin = make_url(server.url)
     with create_engine(admin, isolation_level="AUTOCOMMIT").connect() as conn:
