@@ -97,6 +97,11 @@ class Goal:
         name = identify(self.states[0]).name
         return frozenset() if name == KNOTOID else frozenset({name})
 
+    @property
+    def knot_label(self) -> str | None:
+        """What a pull test of this goal must tie, as stored: the knot name, else the state's knot type."""
+        return self.knot if self.knot is not None else ",".join(sorted(self.knot_types)) or None
+
     def tightened_ties(self, knot_name: str | None) -> bool:
         """True when a tightened rope of knot type ``knot_name`` ties what this goal names."""
         return knot_name is not None and knot_name in self.knot_types

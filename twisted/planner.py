@@ -1087,7 +1087,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
         with store.session(write=True) as session:
             record_tightening(
                 session, out.tightened, final_p_data, run_id=run_id, node_seq=path[-1].seq,
-                goal_knot=goal.knot if goal.knot is not None else ",".join(sorted(goal.knot_types)) or None,
+                goal_knot=goal.knot_label,
                 ties_goal=out.ties_goal,
             )
     return out

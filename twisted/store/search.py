@@ -323,11 +323,10 @@ class SearchRun:
         """Store the pull test of ``node`` (``plan --tighten``) with this run."""
         from twisted.store.knots import record_tightening
 
-        goal_knot = goal.knot if goal.knot is not None else ",".join(sorted(goal.knot_types)) or None
         with self.store.session(write=True) as session:
             record_tightening(
                 session, result, node.p_data, run_id=self.run_id, node_seq=node.index,
-                goal_knot=goal_knot, ties_goal=ties_goal,
+                goal_knot=goal.knot_label, ties_goal=ties_goal,
             )
 
     def _state_id(self, session: Session, p_data: PData) -> int:
