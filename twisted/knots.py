@@ -63,7 +63,7 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.diagram import LEFT, RIGHT, diagram
-from twisted.topology import PData, PDataError, parse_p_data
+from twisted.topology import PData, PDataError, parse_p_data, projected_crossings
 
 __all__ = [
     "CATALOGUE",
@@ -301,56 +301,27 @@ def closed_gauss_code(p: PData, over: bool = False) -> GaussCode:
     return GaussCode(tuple(events), tuple(signs))
 
 
-def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def gauss_code_from_polygon(points: npt.ArrayLike) -> GaussCode:
     """The diagram of a closed polygon (vertices in order, the last joined to the first) seen from above.
 
     Segments whose projections share an end point (neighbours, or neighbours through a vertical
     segment, whose projection is a point) are not tested against each other. Heights at a crossing
-    are interpolated along each segment; signs by the right-hand rule. Raises ``ValueError`` when
-    the projection is degenerate at a crossing (equal heights), which a small perturbation fixes.
+    are interpolated along each segment; signs by the right-hand rule
+    (:func:`twisted.topology.projected_crossings` with ``closed=True``). Raises ``ValueError`` when the
+    projection is degenerate at a crossing (equal heights, tie rule ``"raise"``), which a small
+    perturbation fixes.
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
         raise ValueError(f"a closed polygon needs shape (N>=3, 3), got {pts.shape}")
     if not np.all(np.isfinite(pts)):
         raise ValueError("polygon points contain NaN or infinity")
-    start = pts
-    d = np.roll(pts, -1, axis=0) - pts
-    m = len(pts)
-    i_idx, j_idx = np.triu_indices(m, k=1)
-    xy = pts[:, :2]
-    # projected vertex identity: vertices with equal (x, y) are one point of the projection
-    _, vid = np.unique(xy, axis=0, return_inverse=True)
-    vid = vid.reshape(-1)
-    a0, a1 = vid[i_idx], vid[(i_idx + 1) % m]
-    b0, b1 = vid[j_idx], vid[(j_idx + 1) % m]
-    share = (a0 == b0) | (a0 == b1) | (a1 == b0) | (a1 == b1)
-    di, dj = d[i_idx, :2], d[j_idx, :2]
-    w = start[j_idx, :2] - start[i_idx, :2]
-    denom = _cross2(di, dj)
-    ok = (np.abs(denom) > 1e-15) & ~share
-    safe = np.where(ok, denom, 1.0)
-    t = _cross2(w, dj) / safe
-    u = _cross2(w, di) / safe
-    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
-    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
-    zi = start[i_idx, 2] + t * d[i_idx, 2]
-    zj = start[j_idx, 2] + u * d[j_idx, 2]
-    if np.any(zi == zj):
-        raise ValueError("two strands cross at equal heights in the projection; perturb the polygon")
-    i_over = zi > zj
-    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
-    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
-    signs = tuple(int(s) for s in np.where(_cross2(d_over, d_under) > 0, 1, -1))
-    k = len(i_idx)
-    param = np.concatenate([i_idx + t, j_idx + u])
-    overs = np.concatenate([i_over, ~i_over])
-    order = np.argsort(param, kind="stable")
+    pc = projected_crossings(pts, closed=True, ties="raise")
+    k = len(pc)
+    overs = np.concatenate([pc.i_over, ~pc.i_over])
+    order = np.argsort(pc.position)  # the visits in walking order (position is a permutation of 1..2k)
     events = tuple((int(e % k), bool(overs[e])) for e in order) if k else ()
+    signs = tuple(int(s) for s in pc.sign)
     return GaussCode(events, signs)
 
 

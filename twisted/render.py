@@ -39,7 +39,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Arc, FancyArrowPatch  # noqa: E402
 
-from twisted.topology import PData, Visit, segment_crossings, visit_positions  # noqa: E402
+from twisted.topology import PData, Visit, projected_crossings  # noqa: E402
 
 __all__ = [
     "CrossingDrawing",
@@ -73,34 +73,28 @@ class CrossingDrawing:
     sign: str  # "+" or "-"
 
 
-def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def crossing_geometry(points: npt.ArrayLike) -> list[CrossingDrawing]:
     """The crossings of a projected rope with their positions and visit numbers.
 
-    Same test and numbering as :func:`twisted.topology.top` (half-open segment parameters, visits
-    ordered by ``segment + t``), so :func:`p_data_of_drawing` of the result equals ``top(points)``.
+    The crossings of :func:`twisted.topology.projected_crossings`, read as :func:`twisted.topology.top`
+    reads them (half-open segment parameters, visits ordered by ``segment + t``, the same tie rule),
+    so :func:`p_data_of_drawing` of the result equals ``top(points)``.
     """
     pts = np.asarray(points, dtype=np.float64)
     start, d = pts[:-1], pts[1:] - pts[:-1]
-    i_idx, j_idx, t, u = segment_crossings(pts)
-    k = len(i_idx)
-    position = visit_positions(i_idx, j_idx, t, u)
+    pc = projected_crossings(pts)
+    k = len(pc)
     out = []
     for c in range(k):
-        i, j, ti, uj = int(i_idx[c]), int(j_idx[c]), float(t[c]), float(u[c])
-        zi = start[i, 2] + ti * d[i, 2]
-        zj = start[j, 2] + uj * d[j, 2]
+        i, j, ti, uj = int(pc.i[c]), int(pc.j[c]), float(pc.t[c]), float(pc.u[c])
         xy = start[i, :2] + ti * d[i, :2]
-        if zi >= zj:
-            over = (i, ti, int(position[c]))
-            under = (j, uj, int(position[c + k]))
+        if pc.i_over[c]:
+            over = (i, ti, int(pc.position[c]))
+            under = (j, uj, int(pc.position[c + k]))
         else:
-            over = (j, uj, int(position[c + k]))
-            under = (i, ti, int(position[c]))
-        sign = "+" if _cross2(d[over[0], :2], d[under[0], :2]) > 0 else "-"
+            over = (j, uj, int(pc.position[c + k]))
+            under = (i, ti, int(pc.position[c]))
+        sign = "+" if pc.sign[c] > 0 else "-"
         out.append(
             CrossingDrawing(
                 xy=(float(xy[0]), float(xy[1])),

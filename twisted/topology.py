@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -24,15 +24,17 @@ import numpy.typing as npt
 __all__ = [
     "PData",
     "PDataError",
+    "ProjectedCrossings",
+    "TieRule",
     "Visit",
     "cross",
+    "cross2",
     "mirror",
     "parse_p_data",
+    "projected_crossings",
     "reverse",
-    "segment_crossings",
     "top",
     "Top",
-    "visit_positions",
 ]
 
 
@@ -194,61 +196,119 @@ def reverse(p: PData) -> PData:
     return p.reverse()
 
 
-def _cross2(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+TieRule = Literal["earlier_over", "raise"]
+"""What :func:`projected_crossings` does when two strands are at exactly the same height at a crossing.
+
+* ``"earlier_over"``: the strand on the earlier segment (nearer the head) is over. :func:`top` and the
+  drawings of ``twisted.render`` use it: P-data must exist for every configuration the simulator
+  returns, and since the rope has a thickness an exact tie of two centrelines does not come from the
+  physics; a fixed choice keeps ``Top`` total and deterministic.
+* ``"raise"``: :class:`ValueError`. ``twisted.knots.gauss_code_from_polygon`` uses it: the knot type of
+  a closed polygon depends on which strand is over, so an arbitrary choice could silently name the
+  wrong knot; its caller perturbs the polygon instead.
+
+Without a tie both rules give the same result.
+"""
+
+
+def cross2(a: FloatArray, b: FloatArray) -> FloatArray:
+    """The z component of the cross product of 2-D vectors (last axis ``x, y``), broadcast."""
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def segment_crossings(
-    points: npt.ArrayLike,
-) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Where the projection of a polyline to the table crosses itself: ``(i_idx, j_idx, t, u)``.
+@dataclass(frozen=True)
+class ProjectedCrossings:
+    """The crossings of a projected polyline (made by :func:`projected_crossings`), one entry each.
 
-    ``points`` has shape (N+1, 3) (not validated here: :func:`top` checks it). Every pair of
-    non-adjacent segments ``i < j - 1`` is tested at once (numpy broadcasting); crossing ``c`` is at
-    ``points[i] + t * (points[i+1] - points[i])`` on segment ``i_idx[c]`` and at parameter ``u`` on
-    segment ``j_idx[c]``. The parameter interval is half-open, ``[0, 1)``, so a crossing exactly at
-    a joint counts once; parallel segments (``|cross| <= 1e-15``) never cross.
+    Crossing ``c`` lies at parameter ``t[c]`` on segment ``i[c]`` and ``u[c]`` on segment ``j[c]``
+    (``i < j``; segment ``s`` runs from point ``s`` to the next point). ``i_over[c]``: the strand on
+    segment ``i`` is over. ``sign[c]``: +1 / -1, ``sign((d_over x d_under) . e_z)`` (section 4.3).
+    ``position`` has length ``2k``: entry ``c`` is the visit number (1..2k) of crossing ``c`` on
+    segment ``i``, entry ``c + k`` its visit on segment ``j``; visits are numbered in walking order,
+    by ``segment + parameter`` (stable sort, so equal parameters keep their order).
+    """
+
+    i: IntArray
+    j: IntArray
+    t: FloatArray
+    u: FloatArray
+    i_over: BoolArray
+    sign: IntArray
+    position: IntArray
+
+    def __len__(self) -> int:
+        return len(self.i)
+
+
+def projected_crossings(
+    points: npt.ArrayLike, *, closed: bool = False, ties: TieRule = "earlier_over"
+) -> ProjectedCrossings:
+    """Where the projection of a polyline to the table crosses itself, with over/under and signs.
+
+    The one segment-crossing computation of the code (docs/DESIGN.md section 4.2): :func:`top`
+    (P-data), ``twisted.knots.gauss_code_from_polygon`` (closed polygons) and ``twisted.render``
+    (drawings) read it. ``points`` has shape (N, 3) and is not validated here (each caller checks it
+    with its own message). Every pair of segments is tested at once (numpy broadcasting); the
+    parameter interval is half-open, ``[0, 1)``, so a crossing exactly at a joint counts once;
+    parallel segments (``|cross| <= 1e-15``) never cross. Heights are interpolated linearly along
+    each segment; the higher strand is over.
+
+    * ``closed=False``: an open rope, segments ``s -> s + 1``; neighbours are not tested.
+    * ``closed=True``: a closed polygon, the last point joined to the first; segments whose
+      projections share an end point (neighbours, or neighbours through a vertical segment, whose
+      projection is a point) are not tested.
+    * ``ties``: what an exact height tie means (:data:`TieRule`).
     """
     pts = np.asarray(points, dtype=np.float64)
-    start = pts[:-1]
-    d = pts[1:] - pts[:-1]
-    i_idx, j_idx = np.triu_indices(len(d), k=2)
+    if closed:
+        start = pts
+        d = np.roll(pts, -1, axis=0) - pts
+        m = len(pts)
+        i_idx, j_idx = np.triu_indices(m, k=1)
+        # projected vertex identity: vertices with equal (x, y) are one point of the projection
+        _, vid = np.unique(pts[:, :2], axis=0, return_inverse=True)
+        vid = vid.reshape(-1)
+        a0, a1 = vid[i_idx], vid[(i_idx + 1) % m]
+        b0, b1 = vid[j_idx], vid[(j_idx + 1) % m]
+        tested = ~((a0 == b0) | (a0 == b1) | (a1 == b0) | (a1 == b1))
+    else:
+        start = pts[:-1]
+        d = pts[1:] - pts[:-1]
+        i_idx, j_idx = np.triu_indices(len(d), k=2)
+        tested = np.ones(len(i_idx), dtype=bool)
     di, dj = d[i_idx, :2], d[j_idx, :2]
     w = start[j_idx, :2] - start[i_idx, :2]
-    denom = _cross2(di, dj)
-    ok = np.abs(denom) > 1e-15
+    denom = cross2(di, dj)
+    ok = (np.abs(denom) > 1e-15) & tested
     safe = np.where(ok, denom, 1.0)
-    t = _cross2(w, dj) / safe
-    u = _cross2(w, di) / safe
+    t = cross2(w, dj) / safe
+    u = cross2(w, di) / safe
     hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
-    return i_idx[hit], j_idx[hit], t[hit], u[hit]
-
-
-def visit_positions(
-    i_idx: npt.NDArray[np.int64],
-    j_idx: npt.NDArray[np.int64],
-    t: npt.NDArray[np.float64],
-    u: npt.NDArray[np.float64],
-) -> npt.NDArray[np.int64]:
-    """Visit numbers (1..2k) of the crossings from :func:`segment_crossings`, in walking order.
-
-    The result has length 2k: entry ``c`` is the visit of crossing ``c`` on segment ``i_idx[c]``,
-    entry ``c + k`` its visit on segment ``j_idx[c]``. Visits are ordered by ``segment + t``
-    (stable sort, so equal parameters keep their order).
-    """
+    i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
+    zi = start[i_idx, 2] + t * d[i_idx, 2]
+    zj = start[j_idx, 2] + u * d[j_idx, 2]
+    if ties == "raise" and np.any(zi == zj):
+        raise ValueError("two strands cross at equal heights in the projection; perturb the polygon")
+    i_over = zi >= zj
+    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
+    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
+    sign = np.where(cross2(d_over, d_under) > 0, 1, -1).astype(np.int64)
     k = len(i_idx)
-    param = np.concatenate([i_idx + t, j_idx + u])
-    order = np.argsort(param, kind="stable")
+    order = np.argsort(np.concatenate([i_idx + t, j_idx + u]), kind="stable")
     position = np.empty(2 * k, dtype=np.int64)
     position[order] = np.arange(1, 2 * k + 1)
-    return position
+    return ProjectedCrossings(i_idx, j_idx, t, u, i_over, sign, position)
 
 
 def top(points: npt.ArrayLike) -> PData:
     """``Top(q)``: P-data of a rope given its centreline points, head first, shape (N+1, 3).
 
-    Every pair of non-adjacent segments of the projection is tested for a crossing at once
-    (numpy broadcasting). A crossing's visits are placed along the rope by ``segment + t``; the
+    The crossings are those of :func:`projected_crossings` (open rope; on an exact height tie the
+    earlier segment is over): a crossing's visits are placed along the rope by ``segment + t``; the
     segment parameter interval is half-open so a crossing exactly at a joint counts once.
     """
     pts = np.asarray(points, dtype=np.float64)
@@ -256,25 +316,17 @@ def top(points: npt.ArrayLike) -> PData:
         raise ValueError(f"points must have shape (N+1, 3), got {pts.shape}")
     if not np.all(np.isfinite(pts)):
         raise ValueError("points contain NaN or infinity")
-    start = pts[:-1]
-    d = pts[1:] - pts[:-1]
-    i_idx, j_idx, t, u = segment_crossings(pts)
-    if len(i_idx) == 0:
+    pc = projected_crossings(pts)
+    k = len(pc)
+    if k == 0:
         return EMPTY
-    zi = start[i_idx, 2] + t * d[i_idx, 2]
-    zj = start[j_idx, 2] + u * d[j_idx, 2]
-    i_over = zi >= zj
-    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
-    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
-    signs = np.where(_cross2(d_over, d_under) > 0, "+", "-")
-    k = len(i_idx)
-    position = visit_positions(i_idx, j_idx, t, u)
     visits = []
     for c in range(k):
-        pi, pj = int(position[c]), int(position[c + k])
-        oi, oj = ("O", "U") if i_over[c] else ("U", "O")
-        visits.append(Visit(pi, oi, pj, str(signs[c])))
-        visits.append(Visit(pj, oj, pi, str(signs[c])))
+        pi, pj = int(pc.position[c]), int(pc.position[c + k])
+        oi, oj = ("O", "U") if pc.i_over[c] else ("U", "O")
+        sign = "+" if pc.sign[c] > 0 else "-"
+        visits.append(Visit(pi, oi, pj, sign))
+        visits.append(Visit(pj, oj, pi, sign))
     visits.sort()
     return PData(tuple(visits))
 

@@ -257,6 +257,9 @@ class Crossings:
     arcs: torch.Tensor  # (B, MAX_VISITS) segment + t of each visit in P-data order, inf when absent
 
 
+# The torch twin of twisted.topology.cross2 / projected_crossings: the encoder runs batched on the
+# model's device (GPU too) and keeps every segment pair as a fixed-size feature, hit or not, so the numpy
+# function (one rope, hits only) cannot be reused here.
 def _cross2(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
