@@ -2,7 +2,7 @@
 
 Takes up to --per-class configurations of each class from a database (collected configurations and the
 nodes of planner trees; classes: every knot type that both closures agree on, and the knotoids by their
-(under, over) closures), pulls each tight (twisted.sim.tighten) and prints, per class, what the
+(under, over) closures), pulls each tight (twisted.tighten) and prints, per class, what the
 tightened ropes tie, the agreement rate and the time per pull test.
 
     python bench/bench_tighten.py --db sqlite:////tmp/copy.db [--per-class 40] [--seed 0]
@@ -23,7 +23,7 @@ from collections import Counter, defaultdict
 import numpy as np
 
 from twisted.knots import identify
-from twisted.sim.tighten import tighten, tightening_sim
+from twisted.tighten import tighten, tightening_sim
 from twisted.topology import parse_p_data
 
 

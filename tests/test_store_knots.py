@@ -218,7 +218,7 @@ def test_new_states_get_both_closures_and_queries_match_the_views(db_url: str) -
 
 
 def test_pull_tests_are_stored_and_read_back(db_url: str) -> None:
-    from twisted.sim.tighten import Tightened
+    from twisted.tighten import Tightened
 
     points = np.linspace(0.0, 1.0, 66).reshape(22, 3)
     tight = Tightened(True, None, TREFOIL_3_PLUS, identify(TREFOIL_3_PLUS), points, 0.55, 3.5, 0.1)

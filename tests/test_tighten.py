@@ -18,9 +18,9 @@ from cli.main import app
 from twisted.knots import identify
 from twisted.planner import straight_rope
 from twisted.sim.mjcf import LINK_RADIUS_M, ROPE_LENGTH_M
-from twisted.sim.tighten import Tightened, tighten, tightening_sim
 from twisted.store import open_store
 from twisted.store.knots import tightenings
+from twisted.tighten import Tightened, tighten, tightening_sim
 from twisted.topology import EMPTY, parse_p_data, top
 
 runner = CliRunner()

@@ -94,7 +94,7 @@ class PlannerOptions:
     plan_limit: int = 100  # high-level plans kept per reached state
     seed: int = 0
     ucb_c: float = 0.7  # exploration weight of the ucb heuristic (rewards lie in [0, 1])
-    # success means "reached a goal state and the pull test ties the goal's knot" (twisted.sim.tighten)
+    # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
     def validate(self) -> None:
@@ -709,7 +709,7 @@ class Twisted:
         tight ties the goal's knot (the pull test is deterministic; a resume re-runs it unrecorded)."""
         if not self.options.tighten:
             return True
-        from twisted.sim.tighten import tighten, tightening_sim
+        from twisted.tighten import tighten, tightening_sim
 
         if self._tighten_sim is None:
             self._tighten_sim = tightening_sim()
@@ -1051,7 +1051,7 @@ class ReplayResult:
 def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool = False) -> ReplayResult:
     """Re-simulate a solved run's plan from its initial configuration, in this process.
 
-    ``tighten``: then pull the final rope tight (:mod:`twisted.sim.tighten`) and store the pull test with
+    ``tighten``: then pull the final rope tight (:mod:`twisted.tighten`) and store the pull test with
     the run (table ``tightenings``).
     """
     from twisted.sim import Curve, RopeSim
@@ -1078,9 +1078,9 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
         state, final_p_data = result.state, result.p_data
     out = ReplayResult(run_id, info.goal, steps)
     if tighten and final_p_data is not None:
-        from twisted.sim.tighten import tighten as pull
-        from twisted.sim.tighten import tightening_sim
         from twisted.store.knots import record_tightening
+        from twisted.tighten import tighten as pull
+        from twisted.tighten import tightening_sim
 
         out.tightened = pull(tightening_sim(friction_scale), state)
         goal = info.goal

@@ -103,7 +103,7 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
     """The MJCF text of the straight rope along x, centred at the origin, resting on the table.
 
     ``tail_gripper`` adds a second mocap body and one inactive weld of it to the tail link (the pull
-    test of :mod:`twisted.sim.tighten` holds the head with the first gripper, the tail with this one).
+    test of :mod:`twisted.tighten` holds the head with the first gripper, the tail with this one).
     Neither adds a degree of freedom: states are the same vectors as without it.
     """
     mu = _fmt(*(f * params.friction_scale for f in FRICTION))

@@ -21,6 +21,8 @@ from twisted.sim.mjcf import (
     LINK_RADIUS_M,
     N_LINKS,
     N_POINTS,
+    TAIL_GRIPPER,
+    TAIL_WELD,
     RopeParams,
     joint_names,
     link_name,
@@ -147,6 +149,7 @@ class RopeSim:
         if not (math.isfinite(friction_scale) and friction_scale > 0):
             raise ValueError(f"friction_scale must be a positive number, got {friction_scale!r}")
         self.params = RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
+        self.tail_gripper = tail_gripper  # the second gripper of the pull test (docs/DESIGN.md section 2.2)
         self.model = mujoco.MjModel.from_xml_string(rope_xml(self.params, tail_gripper=tail_gripper))
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -156,6 +159,8 @@ class RopeSim:
         # centreline point i (1..20) is the anchor of the joint between links i-1 and i
         self._pitch = np.array([m.joint(joint_names(i)[1]).id for i in range(N_LINKS - 1)])
         self._gripper = m.body("gripper").mocapid[0]
+        self._tail_gripper = int(m.body(TAIL_GRIPPER).mocapid[0]) if tail_gripper else -1
+        self._tail_weld = int(m.equality(TAIL_WELD).id) if tail_gripper else -1
         # the rope tips lie opposite the first/last joint anchor in the end links' frames
         self._head_offset = -m.jnt_pos[self._pitch[0]].copy()
         self._tail_offset = -m.jnt_pos[self._pitch[-1]].copy()
@@ -175,6 +180,11 @@ class RopeSim:
     @property
     def state_size(self) -> int:
         return self.model.nq + self.model.nv
+
+    @property
+    def window_steps(self) -> int:
+        """Time steps in one settle window (``SETTLE_WINDOW_S``): how often long loops check validity."""
+        return self._window_steps
 
     def reset(self) -> None:
         """The straight rope along x, centred at the origin, resting on the table."""
@@ -277,6 +287,56 @@ class RopeSim:
         """Open the gripper: no link is welded any more."""
         self.data.eq_active[self._weld] = 0
 
+    # ---- both ends held (the pull test, docs/DESIGN.md section 9.5) ---------------------------------
+
+    def grasp_ends(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Weld the head link to the gripper and the tail link to the tail gripper, each where it lies.
+
+        Needs ``RopeSim(tail_gripper=True)``. Returns the end links' poses (copies), which are now the
+        grippers' poses: ``head_pos, head_quat, tail_pos, tail_quat``.
+        """
+        if not self.tail_gripper:
+            raise ValueError("grasp_ends needs a simulator with a tail gripper (RopeSim(tail_gripper=True))")
+        d = self.data
+        head_body, tail_body = self._link_body[0], self._link_body[N_LINKS - 1]
+        d.eq_active[:] = 0
+        head_pos, tail_pos = d.xpos[head_body].copy(), d.xpos[tail_body].copy()
+        head_quat, tail_quat = d.xquat[head_body].copy(), d.xquat[tail_body].copy()
+        self.set_end_grippers(head_pos, tail_pos, head_quat, tail_quat)
+        d.eq_active[self._weld[0]] = 1
+        d.eq_active[self._tail_weld] = 1
+        return head_pos, head_quat, tail_pos, tail_quat
+
+    def set_end_grippers(
+        self,
+        head_pos: npt.ArrayLike,
+        tail_pos: npt.ArrayLike,
+        head_quat: npt.ArrayLike | None = None,
+        tail_quat: npt.ArrayLike | None = None,
+    ) -> None:
+        """Move the head and tail grippers (positions, and orientations when given) for the next step."""
+        d = self.data
+        d.mocap_pos[self._gripper] = head_pos
+        d.mocap_pos[self._tail_gripper] = tail_pos
+        if head_quat is not None:
+            d.mocap_quat[self._gripper] = head_quat
+        if tail_quat is not None:
+            d.mocap_quat[self._tail_gripper] = tail_quat
+
+    def end_gripper_positions(self) -> tuple[FloatArray, FloatArray]:
+        """Where the head and tail grippers are (copies)."""
+        d = self.data
+        return d.mocap_pos[self._gripper].copy(), d.mocap_pos[self._tail_gripper].copy()
+
+    def end_lag_m(self) -> float:
+        """How far an end gripper leads its link, the larger of the two: the welds stretch under tension."""
+        d = self.data
+        head_body, tail_body = self._link_body[0], self._link_body[N_LINKS - 1]
+        return max(
+            float(np.linalg.norm(d.mocap_pos[self._gripper] - d.xpos[head_body])),
+            float(np.linalg.norm(d.mocap_pos[self._tail_gripper] - d.xpos[tail_body])),
+        )
+
     def apply(self, curve: Curve) -> CurveOutcome:
         """Simulate one curve from the current state; deterministic given ``state()`` and ``curve``.
 
@@ -300,7 +360,7 @@ class RopeSim:
         steps = carry_steps + settle_steps
         if reason is not None:
             return CurveOutcome(False, reason, steps)
-        mujoco.mj_forward(self.model, self.data)  # kinematics of the final state for link_points()
+        self.forward()  # kinematics of the final state for link_points()
         reason = self.invalid_reason()
         return CurveOutcome(reason is None, reason, steps)
 
@@ -318,7 +378,7 @@ class RopeSim:
         for k, target in enumerate(path):
             d.mocap_pos[self._gripper] = target
             steps += 1
-            if (reason := self._step()) is not None:
+            if (reason := self.step()) is not None:
                 return reason, steps
             if steps % window == 0 and (reason := self.invalid_reason()) is not None:
                 return reason, steps
@@ -335,7 +395,7 @@ class RopeSim:
         while steps < self._settle_cap_steps:
             for _ in range(window):
                 steps += 1
-                if (reason := self._step()) is not None:
+                if (reason := self.step()) is not None:
                     return reason, steps
             if (reason := self.invalid_reason()) is not None:
                 return reason, steps
@@ -348,7 +408,11 @@ class RopeSim:
         speed = moved / window_s
         return f"rope did not settle within {SETTLE_CAP_S} s (a link still moves at {speed:.3f} m/s)", steps
 
-    def _step(self) -> str | None:
+    def forward(self) -> None:
+        """Recompute the kinematics of the current state (after :meth:`step`, before reading points)."""
+        mujoco.mj_forward(self.model, self.data)
+
+    def step(self) -> str | None:
         """One time step; the reason to stop when two geoms sink deeper than a radius into each other.
 
         Checked at every step because a strand moving at the gripper's speed could pass through

@@ -2,7 +2,7 @@
 
 ``knot_type`` is the knot a state really ties (both closures agree) or ``"knotoid"``; the closures are
 ``closure_under`` / ``closure_over``. ``tightenings`` (0010) holds the pull tests
-(:mod:`twisted.sim.tighten`) run by ``twisted replay --tighten`` and ``twisted plan --tighten``.
+(:mod:`twisted.tighten`) run by ``twisted replay --tighten`` and ``twisted plan --tighten``.
 
 The same answers are in the views ``knot_visits`` and ``knots_tied`` for a sqlite3/psql shell;
 :func:`knots_tied` reads its view (it spans two areas' tables: configurations and planner trees).
@@ -188,7 +188,7 @@ def record_tightening(
     goal_knot: str | None = None,
     ties_goal: bool | None = None,
 ) -> int:
-    """Store a :class:`twisted.sim.tighten.Tightened` of the rope in P-data ``state``; returns its id."""
+    """Store a :class:`twisted.tighten.Tightened` of the rope in P-data ``state``; returns its id."""
     from twisted.knots import identify
 
     row = Tightening(

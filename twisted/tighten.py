@@ -4,18 +4,20 @@ A knot we name must survive being pulled tight (docs/DESIGN.md section 9.5). The
 stored configuration:
 
 1. *grasp*: the head link is welded to the usual gripper and the tail link to a second mocap gripper
-   (:data:`twisted.sim.mjcf.TAIL_GRIPPER`), each exactly where the link lies;
+   (:data:`twisted.sim.mjcf.TAIL_GRIPPER`), each exactly where the link lies (:meth:`RopeSim.grasp_ends`);
 2. *lift and align*: both grippers rise by :data:`LIFT_M` while turning the end links (yaw only) to
    point along the pull direction, the line from the head tip to the tail tip on the table;
 3. *pull*: the grippers move apart along that line at :data:`PULL_SPEED_M_S` each, slowly enough that
-   the penetration check of every step (:meth:`RopeSim._step`, deeper than a radius is an error, never
+   the penetration check of every step (:meth:`RopeSim.step`, deeper than a radius is an error, never
    a silent pass-through) holds, until the rope resists: a gripper leads its link by more than
    :data:`TAUT_LAG_M` (the weld stretches only under tension);
 4. *hold*: the grippers stop and the taut rope settles for :data:`HOLD_S`; then its link points give the
    P-data and :func:`twisted.knots.identify` the knot. The ends are now far apart and outside the knot,
    so both closures agree unless something is wrong (the result says so).
 
-Deterministic given the state: it starts from ``set_state`` like every curve.
+Deterministic given the state: it starts from ``set_state`` like every curve. The module sits beside
+``twisted.knots`` in the layers (docs/DESIGN.md section 1): it drives the simulator through ``RopeSim``'s
+public methods and names the knot, so ``twisted.sim`` stays physics only.
 """
 
 from __future__ import annotations
@@ -24,12 +26,11 @@ import math
 import time
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 import numpy.typing as npt
 
 from twisted.knots import RopeKnot, identify
-from twisted.sim.mjcf import LINK_RADIUS_M, N_LINKS, ROPE_LENGTH_M, TAIL_GRIPPER, TAIL_WELD
+from twisted.sim.mjcf import LINK_RADIUS_M, ROPE_LENGTH_M
 from twisted.sim.rope import WORKSPACE_RADIUS_M, RopeSim, minimum_jerk
 from twisted.topology import PData, PDataError, top
 
@@ -85,22 +86,16 @@ def _nlerp(a: FloatArray, b: FloatArray, s: float) -> FloatArray:
 def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
     """Pull the rope in ``state`` tight on ``sim`` (made by :func:`tightening_sim`) and read its knot."""
     started = time.perf_counter()
-    m, d = sim.model, sim.data
-    try:
-        tail_mocap = int(m.body(TAIL_GRIPPER).mocapid[0])
-        tail_weld = int(m.equality(TAIL_WELD).id)
-    except KeyError:
-        raise ValueError("the pull test needs a simulator with a tail gripper (tightening_sim())") from None
-    head_mocap = sim._gripper
-    head_body, tail_body = int(sim._link_body[0]), int(sim._link_body[N_LINKS - 1])
-    dt = float(m.opt.timestep)
+    if not sim.tail_gripper:
+        raise ValueError("the pull test needs a simulator with a tail gripper (tightening_sim())")
+    dt = float(sim.model.opt.timestep)
     steps = 0
 
     def result(reason: str | None) -> Tightened:
         wall = time.perf_counter() - started
         if reason is not None:
             return Tightened(False, reason, None, None, None, None, steps * dt, wall)
-        mujoco.mj_forward(m, d)
+        sim.forward()
         points = sim.link_points()
         try:
             p = top(points)
@@ -114,53 +109,47 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
     def step() -> str | None:
         nonlocal steps
         steps += 1
-        return sim._step()
+        return sim.step()
 
     sim.set_state(state)
     if (reason := sim.invalid_reason()) is not None:
         return result(f"invalid start state: {reason}")
     # 1. grasp both ends where they lie
-    d.eq_active[:] = 0
-    head_pos, tail_pos = d.xpos[head_body].copy(), d.xpos[tail_body].copy()
-    head_quat, tail_quat = d.xquat[head_body].copy(), d.xquat[tail_body].copy()
-    d.mocap_pos[head_mocap], d.mocap_quat[head_mocap] = head_pos, head_quat
-    d.mocap_pos[tail_mocap], d.mocap_quat[tail_mocap] = tail_pos, tail_quat
-    d.eq_active[sim._weld[0]] = 1
-    d.eq_active[tail_weld] = 1
+    head_pos, head_quat, tail_pos, tail_quat = sim.grasp_ends()
     tips = sim.link_points()[[0, -1], :2]
     direction = tips[1] - tips[0]
     if float(np.linalg.norm(direction)) < 2 * LINK_RADIUS_M:  # ends on top of each other: pull along x
         direction = np.array([1.0, 0.0])
     direction = direction / np.linalg.norm(direction)
     target_quat = _yaw_quat(math.atan2(direction[1], direction[0]))  # links' x axis (head -> tail) along it
-    window = sim._window_steps
+    window = sim.window_steps
     # 2. lift and align
     n_lift = max(1, math.ceil(LIFT_S / dt))
     for k in range(1, n_lift + 1):
         s = float(minimum_jerk(np.array(k / n_lift)))
-        d.mocap_pos[head_mocap] = head_pos + [0.0, 0.0, LIFT_M * s]
-        d.mocap_pos[tail_mocap] = tail_pos + [0.0, 0.0, LIFT_M * s]
-        d.mocap_quat[head_mocap] = _nlerp(head_quat, target_quat, s)
-        d.mocap_quat[tail_mocap] = _nlerp(tail_quat, target_quat, s)
+        sim.set_end_grippers(
+            head_pos + [0.0, 0.0, LIFT_M * s],
+            tail_pos + [0.0, 0.0, LIFT_M * s],
+            _nlerp(head_quat, target_quat, s),
+            _nlerp(tail_quat, target_quat, s),
+        )
         if (reason := step()) is not None:
             return result(reason)
     # 3. pull apart along the line until a weld stretches (the rope resists)
     move = np.array([direction[0], direction[1], 0.0]) * PULL_SPEED_M_S * dt
+    head, tail = sim.end_gripper_positions()
     while True:
         for _ in range(window):
-            d.mocap_pos[head_mocap] -= move
-            d.mocap_pos[tail_mocap] += move
+            head -= move
+            tail += move
+            sim.set_end_grippers(head, tail)
             if (reason := step()) is not None:
                 return result(reason)
         if (reason := sim.invalid_reason(PULL_WORKSPACE_RADIUS_M)) is not None:
             return result(reason)
-        lag = max(
-            float(np.linalg.norm(d.mocap_pos[head_mocap] - d.xpos[head_body])),
-            float(np.linalg.norm(d.mocap_pos[tail_mocap] - d.xpos[tail_body])),
-        )
-        if lag > TAUT_LAG_M:
+        if sim.end_lag_m() > TAUT_LAG_M:
             break
-        if float(np.linalg.norm(d.mocap_pos[tail_mocap] - d.mocap_pos[head_mocap])) > MAX_SEPARATION_M:
+        if float(np.linalg.norm(tail - head)) > MAX_SEPARATION_M:
             return result("the ends came further apart than the rope is long, without tension")
     # 4. hold the taut rope still, then read it
     for _ in range(max(1, math.ceil(HOLD_S / dt))):
