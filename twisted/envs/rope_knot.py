@@ -190,10 +190,10 @@ def goal_pool(
         from twisted.goals import knot_goal
 
         try:
-            states = knot_goal(knot, knot_crossings).states
+            knot_states = knot_goal(knot, knot_crossings).states
         except KnotGoalError as exc:
             raise GoalError(f"knot {knot!r}: {exc}") from None
-        return _check_goals(states, f"knot {knot!r} state")
+        return _check_goals(knot_states, f"knot {knot!r} state")
     from twisted.moves import enumerate_states
 
     counts = sorted(set(int(c) for c in goal_crossings))
