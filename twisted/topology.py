@@ -226,10 +226,10 @@ class ProjectedCrossings:
 
     Crossing ``c`` lies at parameter ``t[c]`` on segment ``i[c]`` and ``u[c]`` on segment ``j[c]``
     (``i < j``; segment ``s`` runs from point ``s`` to the next point). ``i_over[c]``: the strand on
-    segment ``i`` is over. ``sign[c]``: +1 / -1, ``sign((d_over x d_under) . e_z)`` (section 4.3).
-    ``position`` has length ``2k``: entry ``c`` is the visit number (1..2k) of crossing ``c`` on
-    segment ``i``, entry ``c + k`` its visit on segment ``j``; visits are numbered in walking order,
-    by ``segment + parameter`` (stable sort, so equal parameters keep their order).
+    segment ``i`` is over. ``sign[c]``: +1 / -1, ``sign((d_over x d_under) . e_z)`` (docs/DESIGN.md
+    section 4.3). ``position`` has length ``2k``: entry ``c`` is the visit number (1..2k) of crossing
+    ``c`` on segment ``i``, entry ``c + k`` its visit on segment ``j``; visits are numbered in walking
+    order, by ``segment + parameter`` (stable sort, so equal parameters keep their order).
     """
 
     i: IntArray
