@@ -56,7 +56,8 @@ class CollectRun:
         self.run_id = 0
         self.started = time.monotonic()
         self.progress = CollectProgress(run_id=0, elapsed_s=0.0, total_s=options.hours * 3600.0)
-        self.status, self.message = "finished", None
+        self.status = "finished"
+        self.message: str | None = None
         self.notes: list[str] = []  # added to the message (a worker lost on the way)
         self.signals: list[int] = []
         self.stop_requested = False
