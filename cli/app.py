@@ -86,6 +86,7 @@ class _Commands(TyperGroup):
         try:
             return super().invoke(ctx)
         except (typer.Exit, SystemExit):
+            runtime.received.clear()  # the command chose its exit code (and said why): nothing to add
             raise
         except BaseException as exc:
             code = runtime.exit_code(exc)
