@@ -20,7 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from twisted.collect import CollectOptions, collect, collection_stats, default_workers
+from twisted.collect import CollectOptions, collect, collection_stats
+from twisted.runtime import cpu_cores
 from twisted.store import open_store
 
 PAPER_KEPT_PER_HOUR_PER_CORE = 537
@@ -32,7 +33,7 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--minutes", type=float, default=5.0, help="collection time")
-    parser.add_argument("--workers", type=int, default=default_workers(), help="default: all cores")
+    parser.add_argument("--workers", type=int, default=cpu_cores(), help="default: all cores")
     parser.add_argument("--db", default=None, help="database URL (default: a fresh temporary SQLite file)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cross-bias", type=float, default=1.0)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
@@ -11,6 +10,8 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
+
+from twisted.runtime import cpu_cores
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -65,33 +66,34 @@ class _Commands(TyperGroup):
     command ended by Ctrl-C / SIGTERM exits 130 / 143 with one line instead of a traceback."""
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
-        from cli import interrupt
+        from twisted import runtime
 
         harden(self)
-        interrupt.received.clear()  # of an earlier command in this process (tests)
+        runtime.received.clear()  # of an earlier command in this process (tests)
         try:
             return super().main(*args, **kwargs)
         except SystemExit as exc:
             # a signal while the command line is parsed: typer exits 130 silently whichever it was
-            if exc.code == 130 and interrupt.received:
-                code = 128 + interrupt.received[-1]
+            if exc.code == 130 and runtime.received:
+                code = runtime.signal_exit_code(runtime.received[-1])
                 err_console.print(f"interrupted (exit {code}) while starting", highlight=False)
                 raise SystemExit(code) from None
             raise
 
     def invoke(self, ctx: Any) -> Any:
-        from cli import interrupt
+        from twisted import runtime
 
         try:
             return super().invoke(ctx)
         except (typer.Exit, SystemExit):
+            runtime.received.clear()  # the command chose its exit code (and said why): nothing to add
             raise
         except BaseException as exc:
-            code = interrupt.exit_code(exc)
+            code = runtime.exit_code(exc)
             if code is None:
                 raise
             err_console.print(f"interrupted (exit {code}) before the command finished", highlight=False)
-            interrupt.received.clear()  # reported
+            runtime.received.clear()  # reported
             raise typer.Exit(code) from None
 
 
@@ -118,14 +120,6 @@ def main(
     ),
 ) -> None:
     ctx.obj = AppState(db_url=db)
-
-
-def cpu_cores() -> int:
-    """The CPU cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every platform
-        return os.cpu_count() or 1
 
 
 # Worker processes on this machine: each is a Python process with its own simulator (~100 MB); beyond a

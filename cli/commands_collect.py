@@ -11,6 +11,7 @@ from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
 from cli.app import EXIT_BAD_INPUT, app, check_workers, console, fail, open_db, seed_option
+from twisted.runtime import signal_exit_code
 
 EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130  # the shell's convention for a run stopped by a signal: 128 + SIGINT (SIGTERM: 143)
@@ -74,8 +75,9 @@ def collect_command(
     Running it again continues from the configurations already in the database. Ctrl-C or SIGTERM
     stops cleanly (the last batch is committed and the run marked interrupted).
     """
-    from twisted.collect import CollectError, CollectOptions, CollectProgress, collect, default_workers
+    from twisted.collect import CollectError, CollectOptions, CollectProgress, collect
     from twisted.distributed import DistributedError, collect_on_ray, import_ray, resolve_address
+    from twisted.runtime import cpu_cores
 
     if not use_ray:
         check_workers(workers)
@@ -90,7 +92,7 @@ def collect_command(
 
     options = CollectOptions(
         hours=hours,
-        workers=default_workers() if workers is None else workers,
+        workers=cpu_cores() if workers is None else workers,
         seed=seed,
         batch_size=batch_size,
         max_cross=max_cross,
@@ -164,7 +166,7 @@ def collect_command(
         fail(f"collect run {summary.run_id} failed: {summary.message}", EXIT_FAILED)
     if summary.status == "interrupted":
         console.print(f"[yellow]{summary.message}[/]; run `twisted collect` again to continue the same D_Q")
-        raise typer.Exit(128 + summary.signum if summary.signum else EXIT_INTERRUPTED)
+        raise typer.Exit(signal_exit_code(summary.signum) if summary.signum else EXIT_INTERRUPTED)
 
 
 @app.command("stats")

@@ -233,11 +233,13 @@ def _eval(
             )
         except (EvalInputError, DistributedError) as exc:
             fail(str(exc))
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM
+            from twisted import runtime
+
             err_console.print(
                 "interrupted: finished goals are stored; run the same command again to continue"
             )
-            raise typer.Exit(130) from None
+            raise typer.Exit(runtime.exit_code(exc) or 130) from None
     counts: dict[str, int] = {}
     for o in summary.outcomes:
         counts[o.status] = counts.get(o.status, 0) + 1
@@ -283,9 +285,9 @@ def _planner_options(heuristic: str | None, model_id: int | None) -> dict[str, A
 
 
 def _default_parallel() -> int:
-    from twisted.sim import default_workers
+    from twisted.runtime import cpu_cores
 
-    return default_workers()
+    return cpu_cores()
 
 
 @app.command("eval")

@@ -139,7 +139,7 @@ def plan_command(
     The set-up (enumerating a knot's states, loading the model, starting the workers) counts toward
     --timeout and stops at Ctrl-C like the search does.
     """
-    from twisted.planner import StopRequested, StopSignals
+    from twisted.runtime import StopRequested, StopSignals
 
     check_workers(workers)
     if resume_run_id is not None and not resume:

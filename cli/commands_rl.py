@@ -129,9 +129,11 @@ def train_command(
             )
         except (GoalError, ValueError) as exc:
             fail(str(exc), EXIT_BAD_INPUT)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM
+            from twisted import runtime
+
             console.print("interrupted: checkpoint saved; continue with `twisted rl train --resume RUN`")
-            raise typer.Exit(130) from None
+            raise typer.Exit(runtime.exit_code(exc) or 130) from None
     console.print(
         f"run {outcome.run_id} {outcome.status}: {outcome.steps} steps, {outcome.episodes} episodes, "
         f"{outcome.elapsed_s:.0f} s; policy {outcome.checkpoint_id} (`twisted plan --planner sac --model "

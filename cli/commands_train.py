@@ -163,11 +163,11 @@ def train_command(
             fail(str(exc), EXIT_FAILED)
         except ValueError as exc:
             fail(str(exc), EXIT_BAD_INPUT)
-        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (cli.interrupt)
-            from cli import interrupt
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (twisted.runtime.install)
+            from twisted import runtime
 
             console.print("interrupted: checkpoint saved; continue with `twisted train --resume`")
-            raise typer.Exit(interrupt.exit_code(exc) or 130) from None
+            raise typer.Exit(runtime.exit_code(exc) or 130) from None
     m = outcome.metrics
     if outcome.status != "finished":
         console.print(

@@ -10,12 +10,12 @@ import pkgutil
 import sys
 
 import cli
-from cli import interrupt
+from twisted import runtime
 
 if "__mp_main__" in sys.modules:  # imported to start a worker process (multiprocessing)
-    interrupt.worker_process()
+    runtime.worker_process()
 else:
-    interrupt.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
+    runtime.install()  # before anything slow is imported: a Ctrl-C during start-up exits 130 at once
 
 
 def load_commands() -> None:
@@ -29,7 +29,7 @@ try:
 
     load_commands()
 except BaseException as exc:  # a signal during the imports (they may wrap it, e.g. in ImportError)
-    code = interrupt.exit_code(exc)
+    code = runtime.exit_code(exc)
     if code is None:
         raise
     print(f"interrupted (exit {code}) while starting", file=sys.stderr)

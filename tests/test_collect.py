@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import logging
 import signal
 import sqlite3
 import subprocess
@@ -210,10 +211,19 @@ def test_dq_sampling_is_biased_toward_more_crossings() -> None:
 # --- collecting ---------------------------------------------------------------------------------------
 
 
-def test_collect_keeps_replayable_rising_transitions(sqlite_url: str) -> None:
+def test_collect_keeps_replayable_rising_transitions(
+    sqlite_url: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="twisted.collect")
     with open_store(sqlite_url) as store:
         summary = collect(store, CollectOptions(hours=0.05, workers=1, seed=3, max_kept=4, batch_size=2))
     assert summary.status == "finished" and summary.kept >= 4 and summary.tried > summary.kept
+    # the log tells the run's story: its start, one line per committed batch, how it ended
+    lines = [r.getMessage() for r in caplog.records if r.name.startswith("twisted.collect")]
+    assert lines[0].startswith(f"collect run {summary.run_id} started: seed 3, 1 workers")
+    assert sum(" committed: " in line for line in lines) == summary.batches
+    ended = f"collect run {summary.run_id} finished: kept {summary.kept} of {summary.tried} tried"
+    assert lines[-1].startswith(ended)
     _check_consistent(sqlite_url)
     sim = RopeSim()
     with open_store(sqlite_url) as store, store.session() as session:

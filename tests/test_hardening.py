@@ -23,7 +23,7 @@ from sqlalchemy import select, update
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.planner import StopRequested, StopSignals
+from twisted.runtime import StopRequested, StopSignals
 from twisted.store import Run, open_store
 
 REPO = Path(__file__).resolve().parents[1]

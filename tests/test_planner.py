@@ -27,7 +27,6 @@ from twisted.planner import (
     PlannerOptions,
     RandomCurves,
     SearchTree,
-    StopSignals,
     Twisted,
     check_goal,
     replay,
@@ -35,6 +34,7 @@ from twisted.planner import (
     start_search,
     straight_rope,
 )
+from twisted.runtime import StopSignals
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.search import SearchCheckpoint, SearchNode, SearchRunRow, load_run

@@ -37,44 +37,31 @@ worker); for a cluster of several machines use PostgreSQL (README: "Collecting o
 from __future__ import annotations
 
 import logging
-import math
 import os
-import secrets
-import signal
 import socket
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from sqlalchemy import func, select, update
+from sqlalchemy import update
 
 from twisted.collect import (
-    RUN_KIND,
     CollectError,
+    CollectLoop,
     CollectOptions,
     CollectProgress,
+    CollectRun,
     CollectSummary,
-    DQIndex,
-    ensure_root,
-    make_batch,
-    record_curve,
-    stop_on_signals,
 )
-from twisted.store import CollectBatch, Configuration, Run, Store, Transition, open_store
+from twisted.runtime import sigterm_as_interrupt
+from twisted.store import Run, Store
 from twisted.store.db import sqlite_path
-from twisted.store.queries import (
-    BatchRecord,
-    KeptTransition,
-    add_collect_batch,
-    batch_id,
-    configuration_index,
-    end_run,
-    mark_stale_runs,
-    start_run,
-)
+from twisted.store.queries import BatchRecord, add_collect_batch, batch_id
+
+log = logging.getLogger(__name__)
 
 RAY_MISSING = (
     "--ray needs Ray, an optional extra that is not installed: pip install 'twisted-knots[distributed]'"
@@ -199,81 +186,28 @@ class BatchReport:
 
 
 class CollectWorker:
-    """A Ray actor that owns one ``RopeSim`` and simulates one batch of random curves per call.
+    """A Ray actor that runs the collect loop (:class:`twisted.collect.CollectLoop`) one batch per call.
 
-    It reads D_Q (ids and crossing counts, then start configurations on demand) from the database at
-    ``url``, which must therefore be reachable from its machine. With ``write=True`` it commits its
-    batches itself (PostgreSQL).
+    It reads D_Q from the database at ``url``, which must therefore be reachable from its machine. With
+    ``write=True`` it commits its batches itself (PostgreSQL).
     """
 
     def __init__(
         self, url: str, run_id: int, worker: int, seed: int, options: CollectOptions, write: bool
     ) -> None:
-        from twisted.sim import RopeSim
-
-        self.run_id, self.worker, self.seed, self.options, self.write = run_id, worker, seed, options, write
-        self.sim = RopeSim(options.friction_scale)
-        # create=False: a worker must never create an empty SQLite file where the database is missing
-        self.store = open_store(url, create=False, upgrade=False)
-        self.dq = DQIndex(options.max_cross, options.cross_bias)
-        self.cache: dict[int, tuple[np.ndarray, int, int, np.ndarray]] = {}
-        self.last_refresh = -math.inf
+        self.run_id, self.worker, self.seed, self.write = run_id, worker, seed, write
+        self.loop = CollectLoop(url, run_id, worker, options)
 
     def location(self) -> tuple[str, int]:
         """(host name, process id) of this actor."""
         return socket.gethostname(), os.getpid()
 
-    def _refresh(self) -> None:
-        with self.store.session() as session:
-            self.dq.add(*configuration_index(session, after_id=self.dq.last_id, kind=RUN_KIND))
-        self.last_refresh = time.monotonic()
-
-    def _load(self, config_id: int) -> tuple[np.ndarray, int, int, np.ndarray]:
-        """(q, state id, crossing count, link points) of a D_Q configuration, cached."""
-        if config_id not in self.cache:
-            if len(self.cache) > 4096:
-                self.cache.clear()
-            with self.store.session() as session:
-                q, state_id, cross, points = session.execute(
-                    select(
-                        Configuration.q, Configuration.state_id, Configuration.cross, Configuration.points
-                    ).where(Configuration.id == config_id)
-                ).one()
-            self.cache[config_id] = (
-                np.frombuffer(q, dtype="<f8").astype(np.float64),
-                state_id,
-                cross,
-                np.frombuffer(points, dtype="<f8").astype(np.float64).reshape(-1, 3),
-            )
-        return self.cache[config_id]
-
     def run_batch(self, seq: int, seconds: float) -> BatchReport:
         """Simulate curves for up to ``seconds`` (or ``batch_size`` kept); commit or return the batch."""
-        from twisted.proposals import propose_curve
-
-        started = time.monotonic()
-        if started - self.last_refresh >= self.options.refresh_seconds or len(self.dq) == 0:
-            self._refresh()
         # One generator per batch: a batch replays from (seed, run, worker, seq) and the same D_Q, and
         # a retried batch draws the same curves as the attempt it replaces.
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.run_id, self.worker, seq]))
-        tries: dict[int, list[int]] = {}  # start cross -> [tried, kept, rejected]
-        kept: list[KeptTransition] = []
-        sim_seconds = 0.0
-        max_cross = self.options.max_cross
-        while len(kept) < self.options.batch_size and time.monotonic() - started < seconds:
-            config_id = self.dq.sample(rng)
-            q, state_id, cross, points = self._load(config_id)
-            curve = propose_curve(rng, points, self.options.across_share)
-            t0 = time.perf_counter()
-            self.sim.set_state(q)
-            outcome = self.sim.apply(curve)
-            p_data = self.sim.p_data() if outcome.ok else None
-            sim_seconds += time.perf_counter() - t0
-            record_curve(
-                tries, kept, self.sim, config_id, state_id, cross, curve, p_data, max_cross, outcome.steps
-            )
-        record = make_batch(self.run_id, self.worker, seq, tries, kept, sim_seconds)
+        record, _ = self.loop.batch(seq, rng, seconds)
         host, pid = self.location()
         report = BatchReport(
             record.batch_id,
@@ -282,20 +216,20 @@ class CollectWorker:
             record.tried,
             record.kept,
             record.rejected,
-            sim_seconds,
+            record.sim_seconds,
             host,
             pid,
         )
         if not self.write or record.tried == 0:
             return replace(report, record=record if record.tried else None)
-        with self.store.session() as session:
+        with self.loop.store.session() as session:
             new = add_collect_batch(session, record)
         return replace(report, stored=new is not None, new_crosses=tuple(cross for _, cross in new or ()))
 
     def __del__(self) -> None:
-        store = getattr(self, "store", None)
-        if store is not None:
-            store.close()
+        loop = getattr(self, "loop", None)
+        if loop is not None:
+            loop.close()
 
 
 def _ray_errors(ray: Any) -> tuple[tuple[type[BaseException], ...], tuple[type[BaseException], ...]]:
@@ -360,167 +294,83 @@ def _collect(
     on_progress: Callable[[CollectProgress], None] | None,
 ) -> CollectSummary:
     gone_errors, task_errors = _ray_errors(ray)
-    seed = options.seed if options.seed is not None else secrets.randbits(63)
-    with store.session(write=True) as session:
-        mark_stale_runs(session, RUN_KIND)
-        parameters = asdict(options) | {
-            "seed": seed,
-            "dq_sampling": "P(c) ~ (1+c)**cross_bias, uniform within c",
-            "ray": {"address": address, "nodes": nodes, "writer": mode, "max_restarts": max_restarts},
-        }
-        run_id = start_run(session, RUN_KIND, parameters, seed=seed).id
-    started = time.monotonic()
-    total_s = options.hours * 3600.0
-    deadline = started + total_s
-    progress = CollectProgress(run_id=run_id, elapsed_s=0.0, total_s=total_s, workers=options.workers)
-    status, message = "finished", None
-    notes: list[str] = []
-    signals: list[int] = []
-    sim_seconds = commit_seconds = 0.0
-    stop = False
-    stopping_since: float | None = None
+    ray_parameters = {"address": address, "nodes": nodes, "writer": mode, "max_restarts": max_restarts}
+    run = CollectRun(
+        store,
+        options,
+        lost="batches in flight lost",
+        on_progress=on_progress,
+        parameters={"ray": ray_parameters},
+    )
     dead: set[int] = set()
     actors: list[Any] = []
     pending: dict[Any, tuple[int, int]] = {}  # object ref -> (worker, seq)
     url = worker_url(store)
 
-    def on_signal(signum: int) -> None:
-        nonlocal stop
-        signals.append(signum)
-        stop = True
-        if len(signals) > 1:
-            raise KeyboardInterrupt  # a second signal: stop now, without waiting for the workers
-
-    def submit(worker: int, seq: int) -> None:
-        seconds = min(options.batch_seconds, deadline - time.monotonic())
-        pending[actors[worker].run_batch.remote(seq, seconds)] = (worker, seq)
-
-    try:
-        with stop_on_signals(on_signal):
-            ensure_root(store, run_id, options.friction_scale)
-            actor_class = ray.remote(num_cpus=1, max_restarts=max_restarts, max_task_retries=max_restarts)(
-                CollectWorker
-            )
-            for worker in range(options.workers):
-                actors.append(
-                    actor_class.options(name=None).remote(
-                        url, run_id, worker, seed, options, mode == "workers"
-                    )
-                )
-            for worker in range(options.workers):
-                submit(worker, 0)
-            last_report = last_wall_update = 0.0
-            while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
-                for ref in ready:
-                    worker, seq = pending.pop(ref)
-                    try:
-                        report: BatchReport = ray.get(ref)
-                    except gone_errors as exc:
-                        dead.add(worker)
-                        notes.append(
-                            f"worker {worker} died, lost its batch {batch_id(run_id, worker, seq)} in flight "
-                            f"({type(exc).__name__}: {str(exc).strip().splitlines()[0][:300]})"
-                        )
-                        continue  # the run goes on with the others
-                    except task_errors as exc:
-                        if status != "failed":
-                            status, message = "failed", f"worker {worker} failed:\n{exc}"
-                        stop = True
-                        continue
-                    new_crosses: Sequence[int] | None = None
-                    if report.record is not None:
-                        t0 = time.monotonic()
-                        with store.session(write=True) as session:
-                            new = add_collect_batch(session, report.record, wall_seconds=t0 - started)
-                        commit_seconds += time.monotonic() - t0
-                        new_crosses = None if new is None else [cross for _, cross in new]
-                    elif report.stored:
-                        new_crosses = report.new_crosses
-                    if new_crosses is not None:
-                        progress.tried += report.tried
-                        progress.kept += report.kept
-                        progress.rejected += report.rejected
-                        progress.batches += 1
-                        sim_seconds += report.sim_seconds
-                    if options.max_kept is not None and progress.kept >= options.max_kept:
-                        stop = True
-                    if options.max_tries is not None and progress.tried >= options.max_tries:
-                        stop = True
-                    if not stop and time.monotonic() < deadline:
-                        submit(worker, seq + 1)
-                now = time.monotonic()
-                if mode == "workers" and now - last_wall_update >= 5.0:
-                    # The workers update the counters; keep the wall time current for the views.
-                    with store.session() as session:
-                        session.execute(
-                            update(Run).where(Run.id == run_id).values(wall_seconds=now - started)
-                        )
-                    last_wall_update = now
-                if stopping_since is None and (stop or now >= deadline):
-                    stopping_since = now
-                if pending and stopping_since is not None and now - stopping_since > FINAL_WAIT_S:
-                    notes.append(f"gave up waiting for {len(pending)} batches in flight")
-                    pending.clear()
-                progress.elapsed_s = now - started
-                progress.stopping = stop or now >= deadline
-                progress.workers = len({w for w, _ in pending.values()})
-                if on_progress is not None and (progress.elapsed_s - last_report >= 0.2 or not pending):
-                    on_progress(progress)
-                    last_report = progress.elapsed_s
-            if len(dead) == options.workers and status != "failed":
-                status, message = "failed", "every worker died"
-    except KeyboardInterrupt:
-        status, message = "interrupted", "stopped at once by a second signal (batches in flight lost)"
-    except BaseException as exc:
-        status, message = "failed", f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
+    def kill_actors() -> None:
         for actor in actors:
             ray.kill(actor, no_restart=True)
-        if signals and status == "finished":
-            status, message = "interrupted", f"stopped by {signal.Signals(signals[0]).name}"
-        if notes:
-            message = "; ".join(([message] if message else []) + notes)
-        wall_seconds = time.monotonic() - started
-        with store.session(write=True) as session:
-            end_run(session, run_id, status, message, wall_seconds=wall_seconds)
-    summary = _summary_from_store(store, run_id, status, seed, options.workers, message, commit_seconds)
-    summary.signum = signals[0] if signals else None
-    return summary
 
+    with run.running(clean_up=kill_actors):
+        deadline = run.started + options.hours * 3600.0
 
-def _summary_from_store(
-    store: Store, run_id: int, status: str, seed: int, workers: int, message: str | None, commit_s: float
-) -> CollectSummary:
-    """The run's summary from what is committed (workers may have committed batches never reported)."""
-    with store.session() as session:
-        run = session.get(Run, run_id)
-        assert run is not None
-        batches = session.scalar(select(func.count()).where(CollectBatch.run_id == run_id)) or 0
-        by_cross = dict(
-            session.execute(
-                select(Transition.to_cross, func.count(Transition.id))
-                .where(Transition.run_id == run_id)
-                .group_by(Transition.to_cross)
-                .order_by(Transition.to_cross)
-            ).all()
+        def submit(worker: int, seq: int) -> None:
+            seconds = min(options.batch_seconds, deadline - time.monotonic())
+            pending[actors[worker].run_batch.remote(seq, seconds)] = (worker, seq)
+
+        actor_class = ray.remote(num_cpus=1, max_restarts=max_restarts, max_task_retries=max_restarts)(
+            CollectWorker
         )
-        return CollectSummary(
-            run_id=run_id,
-            status=status,
-            seed=seed,
-            workers=workers,
-            tried=run.tried,
-            kept=run.kept,
-            rejected=run.rejected,
-            batches=int(batches),
-            wall_seconds=run.wall_seconds,
-            sim_seconds=run.sim_seconds,
-            message=message,
-            kept_by_to_cross={int(c): int(n) for c, n in by_cross.items()},
-            commit_seconds=commit_s,
-        )
+        for worker in range(options.workers):
+            actors.append(
+                actor_class.options(name=None).remote(
+                    url, run.run_id, worker, run.seed, options, mode == "workers"
+                )
+            )
+        for worker in range(options.workers):
+            submit(worker, 0)
+        last_wall_update = 0.0
+        stopping_since: float | None = None
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
+            for ref in ready:
+                worker, seq = pending.pop(ref)
+                try:
+                    report: BatchReport = ray.get(ref)
+                except gone_errors as exc:
+                    dead.add(worker)
+                    run.notes.append(
+                        f"worker {worker} died, lost its batch {batch_id(run.run_id, worker, seq)} in flight "
+                        f"({type(exc).__name__}: {str(exc).strip().splitlines()[0][:300]})"
+                    )
+                    log.warning("collect run %d: %s", run.run_id, run.notes[-1])
+                    continue  # the run goes on with the others
+                except task_errors as exc:
+                    run.fail(f"worker {worker} failed:\n{exc}")
+                    continue
+                if report.record is not None:
+                    run.commit(report.record)
+                elif report.stored:
+                    run.count(report.batch_id, report.tried, report.kept, report.rejected)
+                if not run.stop_requested and time.monotonic() < deadline:
+                    submit(worker, seq + 1)
+            now = time.monotonic()
+            if mode == "workers" and now - last_wall_update >= 5.0:
+                # The workers update the counters; keep the wall time current for the views.
+                with store.session() as session:
+                    session.execute(
+                        update(Run).where(Run.id == run.run_id).values(wall_seconds=now - run.started)
+                    )
+                last_wall_update = now
+            if stopping_since is None and (run.stop_requested or now >= deadline):
+                stopping_since = now
+            if pending and stopping_since is not None and now - stopping_since > FINAL_WAIT_S:
+                run.notes.append(f"gave up waiting for {len(pending)} batches in flight")
+                pending.clear()
+            run.tick(len({w for w, _ in pending.values()}), done=not pending, stopping=now >= deadline)
+        if len(dead) == options.workers:
+            run.fail("every worker died")
+    return run.summary()
 
 
 # --- eval -------------------------------------------------------------------------------------------------
@@ -586,42 +436,40 @@ def eval_on_ray(
         queued = list(reversed(tasks))
         pending: dict[Any, Any] = {}
         status, message = "finished", None
-        previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # SIGTERM: stop like Ctrl-C
-        try:
-            while queued or pending:
-                while queued and len(pending) < in_flight:
-                    task = queued.pop()
-                    pending[remote_task.remote(url, task)] = task
-                ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
-                for ref in ready:
-                    task = pending.pop(ref)
-                    try:
-                        outcome = ray.get(ref)
-                    except (*gone_errors, *task_errors) as exc:
-                        text = (
-                            f"Ray task lost ({type(exc).__name__}): {str(exc).strip().splitlines()[0][:300]}"
-                        )
-                        with store.session(write=True) as session:
-                            # the worker died holding the row: free it for a rerun
-                            session.execute(
-                                update(EvalResult)
-                                .where(result_key(task) & (EvalResult.status == "running"))
-                                .values(status="interrupted", message=text)
-                            )
-                        outcome = TaskOutcome(task.goal_key, task.seed, "failed", message=text)
-                    summary.outcomes.append(outcome)
-                    if on_outcome is not None:
-                        on_outcome(outcome, summary)
-        except BaseException as exc:
-            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
-            message = None if status == "interrupted" else repr(exc)
-            _cancel_tasks(ray, pending, summary, TaskOutcome)
-            raise
-        finally:
-            signal.signal(signal.SIGTERM, previous)
-            summary.status = status
-            with store.session(write=True) as session:
-                end_eval_run(session, eval_run_id, status, message)
+        with sigterm_as_interrupt():  # SIGTERM: stop like Ctrl-C
+            try:
+                while queued or pending:
+                    while queued and len(pending) < in_flight:
+                        task = queued.pop()
+                        pending[remote_task.remote(url, task)] = task
+                    ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
+                    for ref in ready:
+                        task = pending.pop(ref)
+                        try:
+                            outcome = ray.get(ref)
+                        except (*gone_errors, *task_errors) as exc:
+                            first_line = str(exc).strip().splitlines()[0][:300]
+                            text = f"Ray task lost ({type(exc).__name__}): {first_line}"
+                            with store.session(write=True) as session:
+                                # the worker died holding the row: free it for a rerun
+                                session.execute(
+                                    update(EvalResult)
+                                    .where(result_key(task) & (EvalResult.status == "running"))
+                                    .values(status="interrupted", message=text)
+                                )
+                            outcome = TaskOutcome(task.goal_key, task.seed, "failed", message=text)
+                        summary.outcomes.append(outcome)
+                        if on_outcome is not None:
+                            on_outcome(outcome, summary)
+            except BaseException as exc:
+                status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+                message = None if status == "interrupted" else repr(exc)
+                _cancel_tasks(ray, pending, summary, TaskOutcome)
+                raise
+            finally:
+                summary.status = status
+                with store.session(write=True) as session:
+                    end_eval_run(session, eval_run_id, status, message)
     return summary
 
 

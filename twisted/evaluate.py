@@ -56,6 +56,7 @@ from sqlalchemy.exc import IntegrityError
 
 from twisted.goals import Goal, state_goal
 from twisted.moves import parse_state, successors
+from twisted.runtime import sigterm_as_interrupt
 from twisted.store.experiments import (
     FINISHED_STATUSES,
     DiscretisationResult,
@@ -503,12 +504,12 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
     """Run one (goal, seed) with the planner and store its outcome (in the calling process)."""
     from twisted.planner import (
         PlannerOptions,
-        StopSignals,
         curve_sampler,
         make_goal,
         resume_search,
         start_search,
     )
+    from twisted.runtime import StopSignals
     from twisted.sim import SimPool
     from twisted.store import open_store
 
@@ -828,32 +829,31 @@ def run_eval(
             proc.join()
         running.clear()
 
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # SIGTERM: stop like Ctrl-C
-    try:
-        while queued or running:
-            while queued and len(running) < parallel:
-                task = queued.pop()
-                proc = ctx.Process(target=_task_process, args=(db_url, task, queue), daemon=False)
-                proc.start()
-                running[(task.goal_key, task.seed)] = proc
-            try:
-                outcomes = [queue.get(timeout=0.5)]
-            except queue_module.Empty:
-                outcomes = reap_silent()
-            for outcome in outcomes:
-                received(outcome)
-                if on_outcome is not None:
-                    on_outcome(outcome, summary)
-    except BaseException as exc:
-        status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
-        message = None if status == "interrupted" else repr(exc)
-        stop_children()
-        raise
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        summary.status = status
-        with store.session(write=True) as session:
-            end_eval_run(session, eval_run_id, status, message)
+    with sigterm_as_interrupt():  # SIGTERM: stop like Ctrl-C
+        try:
+            while queued or running:
+                while queued and len(running) < parallel:
+                    task = queued.pop()
+                    proc = ctx.Process(target=_task_process, args=(db_url, task, queue), daemon=False)
+                    proc.start()
+                    running[(task.goal_key, task.seed)] = proc
+                try:
+                    outcomes = [queue.get(timeout=0.5)]
+                except queue_module.Empty:
+                    outcomes = reap_silent()
+                for outcome in outcomes:
+                    received(outcome)
+                    if on_outcome is not None:
+                        on_outcome(outcome, summary)
+        except BaseException as exc:
+            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
+            message = None if status == "interrupted" else repr(exc)
+            stop_children()
+            raise
+        finally:
+            summary.status = status
+            with store.session(write=True) as session:
+                end_eval_run(session, eval_run_id, status, message)
     return summary
 
 

@@ -32,17 +32,16 @@ exactly where the checkpoint left it and never writes a node twice.
 
 from __future__ import annotations
 
-import contextlib
 import math
-import signal
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from twisted.goals import KNOT_PREFIX, Goal, GoalError, goal_from_spec, knot_goal, state_goal
+from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
 __all__ = [
@@ -58,8 +57,6 @@ __all__ = [
     "SearchRecorder",
     "SearchResult",
     "SearchTree",
-    "StopRequested",
-    "StopSignals",
     "Twisted",
     "ModelCurves",
     "ReplayResult",
@@ -270,112 +267,6 @@ class _Stop(Exception):
     def __init__(self, status: str) -> None:
         super().__init__(status)
         self.status = status
-
-
-class StopRequested(BaseException):
-    """Raised by :class:`StopSignals` inside a blocking wait on the worker pool or during the set-up."""
-
-
-_MAX_TIMER_S = 1e8  # a longer set-up budget is no budget (setitimer overflows near 1e308)
-
-
-class StopSignals:
-    """Turns SIGINT / SIGTERM into a stop request that the search checks between steps.
-
-    The handler only sets a flag, except while the search waits on the worker pool
-    (:meth:`interruptible`): Ctrl-C also kills the workers' current jobs, whose results would then
-    never come, so the wait is cut short by raising :class:`StopRequested`. The unfinished iteration
-    is discarded either way; a store transaction is never interrupted half-way.
-    """
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self.timed_out = False  # the time budget of a set-up section ran out
-        self._waiting = False
-
-    def __call__(self) -> bool:
-        return self.signum is not None
-
-    @property
-    def exit_code(self) -> int:
-        """Shell convention 128 + signal: 130 for Ctrl-C (SIGINT), 143 for SIGTERM."""
-        return 128 + (self.signum or 0)
-
-    @contextlib.contextmanager
-    def interruptible(self) -> Iterator[None]:
-        """A section (a wait on worker processes) that a stop signal may cut short."""
-        self._waiting = True
-        try:
-            if self.signum is not None:
-                raise StopRequested
-            yield
-        finally:
-            self._waiting = False
-
-    @contextlib.contextmanager
-    def setup(self, budget_s: float | None = None) -> Iterator[None]:
-        """The set-up before a search (goal enumeration, imports, loading the model, starting workers).
-
-        Nothing in it can be checkpointed, so a stop signal, or ``budget_s`` seconds passing (the
-        set-up counts toward the search's timeout), ends it at once with :class:`StopRequested`; then
-        :attr:`signum` or :attr:`timed_out` says which. An error that a signal caused inside code that
-        wraps it (an import turns KeyboardInterrupt into ImportError) is reported as StopRequested too.
-        """
-        armed = budget_s is not None and budget_s < _MAX_TIMER_S
-        previous = signal.signal(signal.SIGALRM, self._alarm) if armed else None
-        if armed:
-            assert budget_s is not None
-            signal.setitimer(signal.ITIMER_REAL, max(budget_s, 1e-3))
-        self._waiting = True
-        try:
-            if self.signum is not None:
-                raise StopRequested
-            yield
-        except StopRequested:
-            raise
-        except BaseException as exc:
-            if self.signum is not None or self.timed_out:
-                raise StopRequested from exc
-            raise
-        finally:
-            self._waiting = False
-            if armed:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-                signal.signal(signal.SIGALRM, previous)
-
-    @contextlib.contextmanager
-    def deferred(self) -> Iterator[None]:
-        """Inside :meth:`setup`, a section that a stop signal or the deadline does not cut short (checks of
-        the input, whose errors must win); they take effect when it ends."""
-        waiting, self._waiting = self._waiting, False
-        try:
-            yield
-        finally:
-            self._waiting = waiting
-        if waiting and (self.signum is not None or self.timed_out):
-            raise StopRequested
-
-    def _alarm(self, signum: int, frame: Any) -> None:
-        self.timed_out = True
-        if self._waiting:
-            self._waiting = False
-            raise StopRequested
-
-    def _handler(self, signum: int, frame: Any) -> None:
-        self.signum = signum
-        if self._waiting:
-            self._waiting = False
-            raise StopRequested
-
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[StopSignals]:
-        """Handle SIGINT and SIGTERM for the duration of the block (main thread only)."""
-        previous = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield self
-        finally:
-            for s, h in previous.items():
-                signal.signal(s, h)
 
 
 # --- Algorithm 1 ----------------------------------------------------------------------------------------

@@ -5,7 +5,7 @@
 """
 
 from twisted.sim.mjcf import N_LINKS, N_POINTS
-from twisted.sim.pool import SimPool, SimResult, default_workers, simulate
+from twisted.sim.pool import SimPool, SimResult, simulate
 from twisted.sim.rope import CURVE_HIGH, CURVE_LOW, Curve, CurveOutcome, RopeSim, sample_curve
 
 __all__ = [
@@ -18,7 +18,6 @@ __all__ = [
     "RopeSim",
     "SimPool",
     "SimResult",
-    "default_workers",
     "sample_curve",
     "simulate",
 ]

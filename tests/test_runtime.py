@@ -1,0 +1,103 @@
+"""twisted.runtime: one way for every command to meet Ctrl-C and SIGTERM (exit 130 / 143)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select
+
+from twisted import runtime
+from twisted.store import open_store
+from twisted.store.experiments import EvalResult, ProblemRecord, save_problem_set
+from twisted.topology import parse_p_data
+
+REPO = Path(__file__).resolve().parents[1]
+# a 3-crossing goal that random curves do not reach in seconds
+THREE_CROSSINGS = '[[1,"O",4,"+"],[2,"U",5,"+"],[3,"O",6,"+"],[4,"U",1,"+"],[5,"O",2,"+"],[6,"U",3,"+"]]'
+
+
+def _sigterm() -> None:
+    """SIGTERM aimed at this (the main) thread; sent to the process it might reach another thread."""
+    signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+
+
+def _wait_for(seen: list[int]) -> None:
+    deadline = time.monotonic() + 5
+    while not seen and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def test_sigterm_as_interrupt_raises_keyboard_interrupt_and_restores_the_handler() -> None:
+    before = signal.getsignal(signal.SIGTERM)
+    runtime.received.clear()
+    with pytest.raises(KeyboardInterrupt) as caught, runtime.sigterm_as_interrupt():
+        _sigterm()
+        time.sleep(5)  # cut short by the handler
+    assert signal.getsignal(signal.SIGTERM) is before
+    assert runtime.exit_code(caught.value) == 143
+    runtime.received.clear()
+    assert runtime.exit_code(KeyboardInterrupt()) == 130  # a plain Ctrl-C
+    assert runtime.exit_code(ValueError()) is None
+
+
+def test_stop_on_signals_calls_back_and_restores_the_handlers() -> None:
+    before = {s: signal.getsignal(s) for s in runtime.SIGNALS}
+    seen: list[int] = []
+    with runtime.stop_on_signals(seen.append):
+        _sigterm()
+        _wait_for(seen)
+    assert seen == [signal.SIGTERM]
+    assert {s: signal.getsignal(s) for s in runtime.SIGNALS} == before
+
+
+def test_signals_blocked_holds_signals_back_until_the_end() -> None:
+    """What the worker processes inherit when they are started (they unblock once their handlers are set)."""
+    seen: list[int] = []
+    with runtime.stop_on_signals(seen.append):
+        with runtime.signals_blocked():
+            _sigterm()
+            time.sleep(0.05)
+            assert seen == []
+        _wait_for(seen)
+        assert seen == [signal.SIGTERM]
+
+
+def test_cpu_cores_is_positive() -> None:
+    assert runtime.cpu_cores() >= 1
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_eval_stopped_by_a_signal_exits_128_plus_it(sqlite_url: str, signum: signal.Signals) -> None:
+    """eval used to exit 130 for SIGTERM too (and print a stray "while starting" line after Ctrl-C)."""
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        problems = [ProblemRecord(None, 0, parse_p_data(THREE_CROSSINGS), 0, "imported")]
+        save_problem_set(session, "one", problems, source="imported")
+    command = ["eval", "--set", "one", "--planner", "random-low", "--timeout", "300", "--parallel", "1"]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "cli.main", "--db", sqlite_url, *command, "--workers", "1"],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and process.poll() is None:
+            with open_store(sqlite_url) as store, store.session() as session:
+                if session.scalars(select(EvalResult.plan_run_id)).first() is not None:
+                    break  # the goal's planner is searching
+            time.sleep(0.5)
+        process.send_signal(signum)
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        process.kill()
+    assert process.returncode == 128 + signum, stderr
+    assert "interrupted: finished goals are stored" in stderr and "while starting" not in stderr
+    with open_store(sqlite_url) as store, store.session() as session:
+        assert session.scalars(select(EvalResult.status)).all() == ["interrupted"]
