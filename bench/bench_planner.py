@@ -21,7 +21,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions, check_goal, curve_sampler, start_search
+from twisted.goals import check_goal
+from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions, curve_sampler, start_search
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.topology import PData

@@ -37,28 +37,6 @@ def _curve_row(curve: Any) -> dict[str, Any]:
     return {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
 
 
-def _options(asked: dict[str, Any], base: dict[str, Any] | None = None) -> Any:
-    """PlannerOptions from the command line (None: not given), over the stored ones of a resumed run
-    (which must agree)."""
-    from twisted.planner import PlannerOptions
-
-    given = {name: value for name, value in asked.items() if value is not None}
-    if base is not None:
-        stored = PlannerOptions.from_dict(base).to_dict()
-        clash = [
-            f"--{n.replace('_', '-')} {v} (run has {stored[n]})" for n, v in given.items() if stored[n] != v
-        ]
-        if clash:
-            fail(f"a resumed run keeps its own search options; drop or fix: {', '.join(clash)}")
-        return PlannerOptions.from_dict(stored)
-    options = PlannerOptions(**given)
-    try:
-        options.validate()
-    except ValueError as exc:
-        fail(str(exc))
-    return options
-
-
 @app.command("plan")
 def plan_command(
     ctx: typer.Context,
@@ -289,7 +267,8 @@ def _set_up(
     Enumerating a knot's states and starting the workers stop at once at a signal or the deadline; the
     checks in between (database, run, model) finish first, so that a bad input is reported as such.
     """
-    from twisted.planner import PlanInputError, curve_sampler, make_goal
+    from twisted.goals import make_goal
+    from twisted.planner import PlanInputError, curve_sampler, planner_options
     from twisted.sim.pool import SimPool
 
     goal_p = None
@@ -300,7 +279,10 @@ def _set_up(
         except PlanInputError as exc:
             fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
     if not request.resume:
-        _options(request.search_options)  # exit 2 here, before the store is opened
+        try:
+            planner_options(request.search_options)  # exit 2 here, before the store is opened
+        except PlanInputError as exc:
+            fail(str(exc))
     step("opening the database")
     with stop.deferred():
         store = resources.enter_context(open_db(ctx))
@@ -333,29 +315,21 @@ def _print_model(sampler: Any, used_model_id: int | None, as_json: bool) -> None
 def _run_to_continue(store: Any, request: _Request, goal_p: Any) -> tuple[int | None, Any, int | None]:
     """With --resume: the run, its options and model (exit 2 when it cannot be continued); else the new
     run's options and the model asked for."""
-    from twisted.store.search import find_resumable_run, load_run
+    from twisted.planner import PlanInputError, choose_run
 
-    if not request.resume:
-        return None, _options(request.search_options), request.model_id
-    run_id = request.run_id if request.run_id is not None else find_resumable_run(store, goal_p)
-    if run_id is None:
-        fail("--resume: no unfinished planner run" + (f" for goal {goal_p.spec}" if goal_p else ""))
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        fail(f"--resume {run_id}: there is no planner run {run_id} in this database")
-    if goal_p is not None and info.goal.spec != goal_p.spec:
-        fail(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal_p.spec}")
-    if request.start_config is not None:
-        fail("--start-config cannot change the start of a resumed run")
-    if info.outcome == "solved":
-        fail(f"--resume {run_id}: run {run_id} already solved its goal (see `twisted replay {run_id}`)")
-    if info.holder is not None:
-        fail(f"--resume {run_id}: run {run_id} is still being searched by {info.holder}; stop it first")
-    parameters = info.parameters
-    model_id = request.model_id
-    if model_id is not None and parameters.get("model_id") not in (None, model_id):
-        fail(f"--model {model_id}: run {run_id} was searched with model {parameters.get('model_id')}")
-    return run_id, _options(request.search_options, base=parameters), parameters.get("model_id", model_id)
+    try:
+        chosen = choose_run(
+            store,
+            goal_p,
+            request.search_options,
+            resume=request.resume,
+            run_id=request.run_id,
+            model_id=request.model_id,
+            start_config=request.start_config,
+        )
+    except PlanInputError as exc:
+        fail(str(exc))
+    return chosen.run_id, chosen.options, chosen.model_id
 
 
 def _begin(setup: _Setup, stop: Any) -> Any:

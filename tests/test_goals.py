@@ -11,10 +11,10 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from twisted.evaluate import parse_goal_file
-from twisted.goals import Goal, GoalError, goal_from_spec, knot_goal, state_goal
+from twisted.goals import Goal, GoalError, PlanInputError, goal_from_spec, knot_goal, make_goal, state_goal
 from twisted.knots import identify
 from twisted.moves import Plan, enumerate_states, plans, plans_to_any
-from twisted.planner import PlanInputError, high_level, make_goal, replay
+from twisted.planner import high_level, replay
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, load_problem_set
 from twisted.store.knots import knots_tied

@@ -7,6 +7,7 @@ every run here is the same run each time.
 from __future__ import annotations
 
 import json
+import logging
 import signal
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from sqlalchemy import func, select, text
 from typer.testing import CliRunner
 
 from cli.main import app
+from twisted.goals import PlanInputError, check_goal
 from twisted.moves import plans
 from twisted.planner import (
     Node,
@@ -28,7 +30,7 @@ from twisted.planner import (
     RandomCurves,
     SearchTree,
     Twisted,
-    check_goal,
+    planner_options,
     replay,
     resume_search,
     start_search,
@@ -108,6 +110,33 @@ def test_tree_keeps_only_results_that_do_not_lose_crossings_nor_overshoot(tmp_pa
             stored = session.scalar(select(func.count()).select_from(SearchNode))
         assert stored == len(tree) == result.nodes
 
+
+
+def test_a_search_logs_its_start_checkpoints_and_end(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    options = PlannerOptions(planner="random-low", seed=3, k=4, p_expand=0.5, k_expand=8)
+    caplog.set_level(logging.DEBUG, logger="twisted.planner.session")
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        search = start_search(store, check_goal(THREE_CROSSINGS), options, pool)
+        search.run(max_iterations=2)
+        resume_search(store, search.run_id, pool).run(max_iterations=3)  # type: ignore[arg-type]
+    lines = [r.getMessage() for r in caplog.records if r.name == "twisted.planner.session"]
+    assert lines[0].startswith("run 1: new search from the straight rope for goal [[1,")
+    assert "planner random-low, heuristic crs, model none, seed 3" in lines[0]
+    assert any(line.startswith("run 1: checkpoint at iteration 2") for line in lines)
+    assert any(line.startswith("run 1 stopped at its iteration limit") for line in lines)
+    assert any(line.startswith("run 1: resumed at iteration 2") for line in lines)
+    assert "iterations" in lines[-1] and "simulator calls" in lines[-1]
+
+
+def test_a_resumed_run_keeps_its_options() -> None:
+    stored = PlannerOptions(planner="random-low", seed=4).to_dict()
+    assert planner_options({"seed": 4, "k": None}, stored=stored) == PlannerOptions.from_dict(stored)
+    with pytest.raises(PlanInputError, match=r"drop or fix: --seed 5 \(run has 4\)"):
+        planner_options({"seed": 5}, stored=stored)
+    with pytest.raises(PlanInputError, match="heuristic must be one of"):
+        planner_options({"heuristic": "bogus"})
 
 # --- selection heuristics --------------------------------------------------------------------------------
 
@@ -366,8 +395,8 @@ def test_bad_goals_exit_2(tmp_path: Path, goal: str) -> None:
 
 
 def test_goal_limit_is_what_the_model_encodes() -> None:
+    from twisted.goals import MAX_GOAL_CROSS
     from twisted.model.encoding import MAX_CROSSINGS
-    from twisted.planner import MAX_GOAL_CROSS
 
     assert MAX_GOAL_CROSS == MAX_CROSSINGS
 

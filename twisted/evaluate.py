@@ -502,13 +502,8 @@ def _set_row(store: Any, row_id: int, **values: Any) -> None:
 
 def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
     """Run one (goal, seed) with the planner and store its outcome (in the calling process)."""
-    from twisted.planner import (
-        PlannerOptions,
-        curve_sampler,
-        make_goal,
-        resume_search,
-        start_search,
-    )
+    from twisted.goals import make_goal
+    from twisted.planner import PlannerOptions, curve_sampler, resume_search, start_search
     from twisted.runtime import StopSignals
     from twisted.sim import SimPool
     from twisted.store import open_store

@@ -8,6 +8,10 @@ crossing number) that really tie that knot: both closures, under and over the ta
 Goals are written as one line of text, the *goal spec*, wherever a goal must be stored or passed on:
 the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@<crossings>`` for a knot
 (``knot:overhand@3``). Problem sets, evaluation results and planner runs store that text.
+
+What a person types (``--goal``, ``--knot``, ``--crossings``) becomes a goal through :func:`make_goal`,
+which also checks that the inverse model can encode it (:data:`MAX_GOAL_CROSS`) and raises
+:class:`PlanInputError` saying which input is wrong.
 """
 
 from __future__ import annotations
@@ -21,17 +25,39 @@ from typing import Any
 
 from twisted.topology import PData
 
-__all__ = ["Goal", "GoalError", "KNOT_PREFIX", "crossing_number", "goal_from_spec", "knot_goal", "state_goal"]
+__all__ = [
+    "Goal",
+    "GoalError",
+    "KNOT_PREFIX",
+    "MAX_GOAL_CROSS",
+    "PlanInputError",
+    "check_goal",
+    "crossing_number",
+    "goal_from_spec",
+    "knot_goal",
+    "make_goal",
+    "state_goal",
+]
 
 KNOT_PREFIX = "knot:"
 # Knots are searched among enumerated states; 5 crossings already takes ~25 s to enumerate, and the
 # inverse model encodes at most 6.
 MAX_KNOT_CROSSINGS = 5
 _KNOT_SPEC = re.compile(r"^knot:(?P<name>[^@\s]+)@(?P<crossings>\d+)$")
+# The model encodes goals of up to 6 crossings (docs/DESIGN.md section 6.1: the reference truncated to 3).
+MAX_GOAL_CROSS = 6
 
 
 class GoalError(ValueError):
     """A goal the planner cannot take (bad P-data, unknown knot, no state of that knot); says why."""
+
+
+class PlanInputError(ValueError):
+    """A goal, run id or start configuration the planner cannot take; the message says why.
+
+    Defined here, below the planner, because goal parsing (:func:`make_goal`) raises it first;
+    :mod:`twisted.planner` raises it for runs, models and start configurations and re-exports it.
+    """
 
 
 @dataclass(frozen=True)
@@ -189,3 +215,54 @@ def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
         return state_goal(parse_state(spec, "goal"))
     except PDataError as exc:
         raise GoalError(str(exc)) from None
+
+
+def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROSS) -> PData:
+    """Parse ``goal``; check that a rope can have it and the model can encode it (else PlanInputError)."""
+    from twisted.moves import parse_state
+    from twisted.topology import PDataError
+
+    try:
+        p_data = parse_state(goal, "goal")
+    except PDataError as exc:
+        raise PlanInputError(str(exc)) from None
+    if p_data.cross > max_cross:
+        raise PlanInputError(
+            f"goal {p_data.key} has {p_data.cross} crossings; the inverse model encodes at most {max_cross}"
+        )
+    if p_data.cross == 0:
+        raise PlanInputError("goal [] (no crossing) is the straight rope itself: give a state with crossings")
+    return p_data
+
+
+def make_goal(
+    goal: str | Sequence[Any] | PData | None = None,
+    knot: str | None = None,
+    crossings: int | None = None,
+    max_cross: int = MAX_GOAL_CROSS,
+) -> Goal:
+    """The goal of a search: one P-data state (``goal``, or a ``knot:<name>@<n>`` spec) or a knot by name.
+
+    Exactly one of ``goal`` and ``knot`` is given; ``crossings`` picks the knot's states of that many
+    crossings (default: the knot's crossing number, see :func:`knot_goal`). Raises
+    :class:`PlanInputError` saying which input is wrong.
+    """
+    if (goal is None) == (knot is None):
+        raise PlanInputError("give exactly one goal: --goal P-DATA or --knot NAME")
+    if crossings is not None and knot is None:
+        raise PlanInputError("--crossings goes with --knot (a P-data goal has its own crossing count)")
+    try:
+        if knot is not None:
+            found = knot_goal(knot, crossings)
+        elif isinstance(goal, str) and goal.strip().startswith(KNOT_PREFIX):
+            found = goal_from_spec(goal)
+        else:
+            assert goal is not None
+            return state_goal(check_goal(goal, max_cross))
+    except GoalError as exc:
+        raise PlanInputError(str(exc)) from None
+    if found.cross > max_cross:
+        raise PlanInputError(
+            f"knot goal {found.spec} has {found.cross} crossings; the model encodes at most {max_cross}"
+        )
+    return found

@@ -1,7 +1,7 @@
 """The planner's hook: curves from a stored SAC+HER policy in place of the inverse model.
 
 ``load_policy_sampler(store, model_id)`` returns ``(SacCurves, checkpoint_id)``; ``SacCurves.sample``
-has the signature of ``twisted.planner.ModelCurves.sample``. The observation is the environment's
+has the signature of ``twisted.model.sampler.ModelCurves.sample``. The observation is the environment's
 (:func:`twisted.envs.observation_of` of the node's points and q), the achieved goal the node's P-data,
 the desired goal the plan's next state, as during training.
 """

@@ -1,4 +1,4 @@
-"""TWISTED (Algorithm 1 of the paper) and its baselines.
+"""TWISTED (Algorithm 1 of the paper) and its baselines: the search itself.
 
 The search keeps a tree ``T`` of reached configurations (each with its topological state ``Top(q)``)
 and a set of high-level plans ``P`` from every reached state to the goal. Each iteration:
@@ -28,6 +28,10 @@ for any number of workers. The search is persisted through a :class:`SearchRecor
 boundaries only: a checkpoint (iteration, elapsed time, RNG state, selection statistics) and the
 tree nodes created up to that boundary are written in one transaction, so a resumed run continues
 exactly where the checkpoint left it and never writes a node twice.
+
+This module knows nothing of the store or the model registry: what a search composes (a curve
+sampler, a worker pool, the high level, a recorder) comes in through the protocols below;
+:mod:`twisted.planner.session` builds searches from the store.
 """
 
 from __future__ import annotations
@@ -40,43 +44,27 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from twisted.goals import KNOT_PREFIX, Goal, GoalError, goal_from_spec, knot_goal, state_goal
+from twisted.goals import Goal, state_goal
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
 __all__ = [
     "HEURISTICS",
-    "MAX_GOAL_CROSS",
     "PLANNERS",
     "Checkpoint",
     "CurveSampler",
     "Node",
-    "PlanInputError",
     "PlannerOptions",
+    "Pool",
     "RandomCurves",
     "SearchRecorder",
     "SearchResult",
     "SearchTree",
     "Twisted",
-    "ModelCurves",
-    "ReplayResult",
-    "check_goal",
-    "curve_sampler",
-    "make_goal",
-    "high_level",
-    "not_finite",
-    "replay",
-    "resume_search",
-    "start_search",
-    "straight_rope",
-    "tree_from_rows",
 ]
 
 PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
-
-# The model encodes goals of up to 6 crossings (docs/DESIGN.md section 6.1: the reference truncated to 3).
-MAX_GOAL_CROSS = 6
 
 
 @dataclass(frozen=True)
@@ -617,368 +605,3 @@ class Twisted:
             self.plans[p_data.key] = []
             return
         self.plans[p_data.key] = list(self.high_level(p_data))[: self.options.plan_limit]
-
-
-# --- composing a search from the store, the simulator, the high level and the model ----------------------
-
-
-class ModelCurves:
-    """Curves from the learned inverse model, conditioned on the rope's points, the next state and
-    the plan's move to it."""
-
-    name = "model"
-
-    def __init__(self, model: Any) -> None:
-        self.model = model
-
-    def sample(
-        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
-    ) -> list[Any]:
-        return list(
-            self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move)
-        )
-
-
-class PlanInputError(ValueError):
-    """A goal, run id or start configuration the planner cannot take; the message says why."""
-
-
-def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROSS) -> PData:
-    """Parse ``goal``; check that a rope can have it and the model can encode it (else PlanInputError)."""
-    from twisted.moves import parse_state
-    from twisted.topology import PDataError
-
-    try:
-        p_data = parse_state(goal, "goal")
-    except PDataError as exc:
-        raise PlanInputError(str(exc)) from None
-    if p_data.cross > max_cross:
-        raise PlanInputError(
-            f"goal {p_data.key} has {p_data.cross} crossings; the inverse model encodes at most {max_cross}"
-        )
-    if p_data.cross == 0:
-        raise PlanInputError("goal [] (no crossing) is the straight rope itself: give a state with crossings")
-    return p_data
-
-
-def make_goal(
-    goal: str | Sequence[Any] | PData | None = None,
-    knot: str | None = None,
-    crossings: int | None = None,
-    max_cross: int = MAX_GOAL_CROSS,
-) -> Goal:
-    """The goal of a search: one P-data state (``goal``, or a ``knot:<name>@<n>`` spec) or a knot by name.
-
-    Exactly one of ``goal`` and ``knot`` is given; ``crossings`` picks the knot's states of that many
-    crossings (default: the knot's crossing number, see :func:`twisted.goals.knot_goal`). Raises
-    :class:`PlanInputError` saying which input is wrong.
-    """
-    if (goal is None) == (knot is None):
-        raise PlanInputError("give exactly one goal: --goal P-DATA or --knot NAME")
-    if crossings is not None and knot is None:
-        raise PlanInputError("--crossings goes with --knot (a P-data goal has its own crossing count)")
-    try:
-        if knot is not None:
-            found = knot_goal(knot, crossings)
-        elif isinstance(goal, str) and goal.strip().startswith(KNOT_PREFIX):
-            found = goal_from_spec(goal)
-        else:
-            assert goal is not None
-            return state_goal(check_goal(goal, max_cross))
-    except GoalError as exc:
-        raise PlanInputError(str(exc)) from None
-    if found.cross > max_cross:
-        raise PlanInputError(
-            f"knot goal {found.spec} has {found.cross} crossings; the model encodes at most {max_cross}"
-        )
-    return found
-
-
-def curve_sampler(
-    store: Any, planner: str, model_id: int | None = None, torch_threads: int = 1
-) -> tuple[CurveSampler | None, int | None]:
-    """The curve sampler of a planner kind and the id of the model it uses (None: random curves).
-
-    ``twisted`` samples the inverse model (``model_id``; default the newest in the store, else the shipped
-    one); ``sac`` a trained SAC+HER policy (``twisted rl train``); the baselines need none. Raises
-    :class:`PlanInputError` when the model is missing. ``torch_threads``: the simulator workers own the
-    cores, and a second torch thread on a busy machine only slows sampling.
-    """
-    if planner not in ("twisted", "sac"):
-        return None, None
-    import torch
-
-    torch.set_num_threads(torch_threads)
-    if planner == "sac":
-        try:
-            from twisted.rl import load_policy_sampler
-        except ImportError as exc:
-            message = f"--planner sac needs the rl extra (pip install 'twisted-knots[rl]'): {exc}"
-            raise PlanInputError(message) from None
-        try:
-            return load_policy_sampler(store, model_id)
-        except LookupError as exc:
-            raise PlanInputError(f"{exc} (train one with `twisted rl train`)") from None
-    from twisted.model.registry import ModelError, load_model
-
-    try:
-        model = load_model(store, model_id)
-    except ModelError as exc:
-        raise PlanInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
-    broken = not_finite(model)
-    if broken:
-        which = "the shipped model" if model.model_id is None else f"model {model.model_id}"
-        hint = "" if model_id is not None else " (the newest in the database)"
-        raise PlanInputError(
-            f"{which}{hint} cannot plan: {broken}; train a new one, or choose another with --model ID "
-            "(see `twisted models`)"
-        )
-    return ModelCurves(model), model.model_id
-
-
-def not_finite(model: Any) -> str | None:
-    """What is not finite in an inverse model (weights, stored losses), in words; None when all is."""
-    import torch
-
-    for name, values in model.net.state_dict().items():
-        if torch.is_floating_point(values) and not bool(torch.isfinite(values).all()):
-            return f"its weights {name} hold NaN or infinity"
-    metrics = model.metadata.get("metrics", {}) or {}
-    for name in ("val_loss", "train_loss"):
-        value = metrics.get(name)
-        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
-            return f"its {name.replace('_', ' ')} is {value}"
-    return None
-
-
-def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
-    """``s -> plans(s, goal)``, shortest first, through the store's plan cache.
-
-    For a goal of several states (a knot) the plans lead to any member (one BFS over all of them).
-    """
-    from twisted.store.plans import cached_plans
-
-    target: Goal | PData = goal.states[0] if len(goal.states) == 1 else goal
-
-    def plans_from(start: PData) -> list[Any]:
-        return list(cached_plans(store, start, target, limit))
-
-    return plans_from
-
-
-def straight_rope() -> tuple[np.ndarray, np.ndarray, PData]:
-    """The default initial configuration: ``RopeSim.reset()`` (q, link points, Top(q))."""
-    from twisted.sim import RopeSim
-
-    sim = RopeSim()
-    sim.reset()
-    return sim.state(), sim.link_points(), sim.p_data()
-
-
-def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
-    return Node(index=0, parent=None, q=q, points=points, p_data=p_data, curve=None, iteration=0, sim_call=0)
-
-
-def start_search(
-    store: Any,
-    goal: Goal | PData,
-    options: PlannerOptions,
-    pool: Pool,
-    sampler: CurveSampler | None = None,
-    start_configuration_id: int | None = None,
-    stop: StopSignals | None = None,
-    progress: Callable[[Twisted], None] | None = None,
-    extra_parameters: dict[str, Any] | None = None,
-) -> Twisted:
-    """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope or a stored configuration.
-
-    ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id).
-    """
-    from twisted.store.search import SearchRun
-
-    options.validate()
-    goal = goal if isinstance(goal, Goal) else state_goal(goal)
-    if start_configuration_id is None:
-        root = _root(*straight_rope())
-    else:
-        from sqlalchemy.exc import NoResultFound
-
-        from twisted.store.queries import load_configuration
-        from twisted.topology import top
-
-        with store.session() as session:
-            try:
-                config = load_configuration(session, start_configuration_id)
-            except NoResultFound:
-                message = f"configuration {start_configuration_id} is not in this database"
-                raise PlanInputError(message) from None
-            q, points = config.q_array(), config.points_array()
-        root = _root(q, points, top(points))
-    if root.p_data in goal:
-        raise PlanInputError(f"the initial configuration is already in the goal state {root.p_data.key}")
-    tree = SearchTree()
-    tree.add(root)
-    rng = np.random.default_rng(options.seed)
-    first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
-    parameters = {**options.to_dict(), **(extra_parameters or {})}
-    recorder = SearchRun.create(store, goal, parameters, root, first, start_configuration_id)
-    return Twisted(
-        goal,
-        tree,
-        options,
-        pool,
-        high_level(store, goal, options.plan_limit),
-        sampler=sampler,
-        recorder=recorder,
-        run_id=recorder.run_id,
-        stop=stop,
-        progress=progress,
-    )
-
-
-def tree_from_rows(rows: Sequence[Any]) -> SearchTree:
-    """Rebuild ``T`` from stored nodes (``twisted.store.search.StoredNode``, in ``seq`` order)."""
-    from twisted.sim import Curve
-
-    tree = SearchTree()
-    for row in rows:
-        curve = None if row.curve is None else Curve(*row.curve)
-        node = Node(
-            index=row.seq,
-            parent=row.parent_seq,
-            q=row.q,
-            points=row.points,
-            p_data=row.p_data,
-            curve=curve,
-            iteration=row.iteration,
-            sim_call=row.sim_call,
-            created_s=row.created_s,
-            db_id=row.id,
-        )
-        tree.add(node)
-    return tree
-
-
-def resume_search(
-    store: Any,
-    run_id: int,
-    pool: Pool,
-    sampler: CurveSampler | None = None,
-    stop: StopSignals | None = None,
-    progress: Callable[[Twisted], None] | None = None,
-) -> Twisted:
-    """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
-    from twisted.store.search import RunBusyError, SearchRun, discard_after_checkpoint, load_run, take_lease
-
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        raise PlanInputError(f"run {run_id} is not a planner run in this database")
-    if info.checkpoint is None:
-        raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
-    try:
-        take_lease(store, run_id)  # from here on this process is the run's one writer
-    except (LookupError, RunBusyError) as exc:
-        raise PlanInputError(str(exc)) from None
-    discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
-    info = load_run(store, run_id)
-    assert info is not None and info.checkpoint is not None
-    options = PlannerOptions.from_dict(info.parameters)
-    tree = tree_from_rows(info.nodes)
-    checkpoint = Checkpoint(
-        iteration=info.checkpoint.iteration,
-        elapsed_s=info.checkpoint.elapsed_s,
-        sim_calls=info.checkpoint.sim_calls,
-        rng_state=info.checkpoint.rng_state,
-        stats=info.checkpoint.stats,
-    )
-    node_ids = {node.index: node.db_id for node in tree.nodes if node.db_id is not None}
-    recorder = SearchRun(store, run_id, node_ids)
-    return Twisted(
-        info.goal,
-        tree,
-        options,
-        pool,
-        high_level(store, info.goal, options.plan_limit),
-        sampler=sampler,
-        recorder=recorder,
-        checkpoint=checkpoint,
-        run_id=run_id,
-        stop=stop,
-        progress=progress,
-    )
-
-
-@dataclass
-class ReplayStep:
-    curve: Any
-    recorded: PData
-    replayed: PData | None  # None: the simulator rejected the result
-    reason: str | None = None
-
-    @property
-    def matches(self) -> bool:
-        return self.replayed == self.recorded
-
-
-@dataclass
-class ReplayResult:
-    run_id: int
-    goal: Goal
-    steps: list[ReplayStep]
-    # with tighten=True: the pull test of the replayed final rope (None when it was not run)
-    tightened: Any = None
-
-    @property
-    def reached_goal(self) -> bool:
-        return bool(self.steps) and self.steps[-1].replayed in self.goal
-
-    @property
-    def ties_goal(self) -> bool:
-        """The replayed rope reached the goal and, pulled tight, ties the goal's knot."""
-        t = self.tightened
-        return self.reached_goal and t is not None and t.ok and self.goal.tightened_ties(t.knot_name)
-
-
-def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool = False) -> ReplayResult:
-    """Re-simulate a solved run's plan from its initial configuration, in this process.
-
-    ``tighten``: then pull the final rope tight (:mod:`twisted.tighten`) and store the pull test with
-    the run (table ``tightenings``).
-    """
-    from twisted.sim import Curve, RopeSim
-    from twisted.sim.pool import simulate
-    from twisted.store.search import load_run, solution_path
-
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        raise PlanInputError(f"run {run_id} is not a planner run in this database")
-    path = solution_path(store, run_id)
-    if not path:
-        raise PlanInputError(f"run {run_id} has no plan to replay (outcome: {info.outcome})")
-    sim = RopeSim(friction_scale)
-    state = path[0].q
-    steps = []
-    final_p_data = None
-    for node in path[1:]:
-        assert node.curve is not None
-        curve = Curve(*node.curve)
-        result = simulate(sim, state, curve)
-        steps.append(ReplayStep(curve, node.p_data, result.p_data if result.ok else None, result.reason))
-        if result.state is None:
-            break
-        state, final_p_data = result.state, result.p_data
-    out = ReplayResult(run_id, info.goal, steps)
-    if tighten and final_p_data is not None:
-        from twisted.store.knots import record_tightening
-        from twisted.tighten import tighten as pull
-        from twisted.tighten import tightening_sim
-
-        out.tightened = pull(tightening_sim(friction_scale), state)
-        goal = info.goal
-        with store.session(write=True) as session:
-            record_tightening(
-                session, out.tightened, final_p_data, run_id=run_id, node_seq=path[-1].seq,
-                goal_knot=goal.knot_label,
-                ties_goal=out.ties_goal,
-            )
-    return out

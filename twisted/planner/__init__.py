@@ -1,0 +1,20 @@
+"""The planner: TWISTED (Algorithm 1 of the paper), its baselines, and searches kept in the store.
+
+- :mod:`twisted.planner.search`: Algorithm 1 on its own. ``Twisted`` (the search), the tree ``T``
+  (``Node``, ``SearchTree``), ``PlannerOptions`` (``PLANNERS``, ``HEURISTICS``), what a search composes
+  (the protocols ``CurveSampler``, ``Pool``, ``SearchRecorder``; ``RandomCurves``), its checkpoint and
+  result. The stop signals it checks between steps are :class:`twisted.runtime.StopSignals`.
+- :mod:`twisted.planner.session`: searches from the store. ``start_search``, ``resume_search``,
+  ``replay``; ``choose_run`` (new run or resume, with the options of each); ``curve_sampler`` (the
+  inverse model or a SAC policy for a planner kind); ``high_level`` (plans through the plan cache).
+
+Goals and their parsing (``make_goal``, ``check_goal``, ``PlanInputError``) live in :mod:`twisted.goals`;
+the inverse model's sampler ``ModelCurves`` in :mod:`twisted.model.sampler`. See docs/DESIGN.md section 8.
+"""
+
+from twisted.goals import PlanInputError
+from twisted.planner import search, session
+from twisted.planner.search import *  # noqa: F403
+from twisted.planner.session import *  # noqa: F403
+
+__all__ = ["PlanInputError", *search.__all__, *session.__all__]

@@ -1,0 +1,483 @@
+"""Searches from the store: start a run, resume one, choose between the two, replay a solved one.
+
+:mod:`twisted.planner.search` is Algorithm 1 on its own; this module composes it with the store (the
+run's tree and checkpoints, the plan cache as the high level), the straight rope or a stored start
+configuration, and the curve sampler of a planner kind (:func:`curve_sampler`, which knows the model
+registry and the SAC policies). :func:`choose_run` is the decision ``twisted plan`` makes between a
+new run and a resumed one, with the checks that come with it. Every refusal raises
+:class:`twisted.goals.PlanInputError` with a message that says which input is wrong.
+
+Each search logs (``logging``, logger ``twisted.planner.session``) its start, each checkpoint
+(DEBUG) and how it ended.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from twisted.goals import Goal, PlanInputError, state_goal
+from twisted.planner.search import (
+    Checkpoint,
+    CurveSampler,
+    Node,
+    PlannerOptions,
+    Pool,
+    SearchTree,
+    Twisted,
+)
+from twisted.runtime import StopSignals
+from twisted.topology import PData
+
+__all__ = [
+    "ReplayResult",
+    "ReplayStep",
+    "RunChoice",
+    "choose_run",
+    "curve_sampler",
+    "high_level",
+    "not_finite",
+    "planner_options",
+    "replay",
+    "resume_search",
+    "start_search",
+    "straight_rope",
+    "tree_from_rows",
+]
+
+log = logging.getLogger(__name__)
+
+
+def curve_sampler(
+    store: Any, planner: str, model_id: int | None = None, torch_threads: int = 1
+) -> tuple[CurveSampler | None, int | None]:
+    """The curve sampler of a planner kind and the id of the model it uses (None: random curves).
+
+    ``twisted`` samples the inverse model (``model_id``; default the newest in the store, else the shipped
+    one); ``sac`` a trained SAC+HER policy (``twisted rl train``); the baselines need none. Raises
+    :class:`PlanInputError` when the model is missing. ``torch_threads``: the simulator workers own the
+    cores, and a second torch thread on a busy machine only slows sampling.
+    """
+    if planner not in ("twisted", "sac"):
+        return None, None
+    import torch
+
+    torch.set_num_threads(torch_threads)
+    if planner == "sac":
+        try:
+            from twisted.rl import load_policy_sampler
+        except ImportError as exc:
+            message = f"--planner sac needs the rl extra (pip install 'twisted-knots[rl]'): {exc}"
+            raise PlanInputError(message) from None
+        try:
+            return load_policy_sampler(store, model_id)
+        except LookupError as exc:
+            raise PlanInputError(f"{exc} (train one with `twisted rl train`)") from None
+    from twisted.model.registry import ModelError, load_model
+
+    try:
+        model = load_model(store, model_id)
+    except ModelError as exc:
+        raise PlanInputError(f"{exc} (or use --planner random-low, which needs no model)") from None
+    broken = not_finite(model)
+    if broken:
+        which = "the shipped model" if model.model_id is None else f"model {model.model_id}"
+        hint = "" if model_id is not None else " (the newest in the database)"
+        raise PlanInputError(
+            f"{which}{hint} cannot plan: {broken}; train a new one, or choose another with --model ID "
+            "(see `twisted models`)"
+        )
+    from twisted.model.sampler import ModelCurves
+
+    return ModelCurves(model), model.model_id
+
+
+def not_finite(model: Any) -> str | None:
+    """What is not finite in an inverse model (weights, stored losses), in words; None when all is."""
+    import torch
+
+    for name, values in model.net.state_dict().items():
+        if torch.is_floating_point(values) and not bool(torch.isfinite(values).all()):
+            return f"its weights {name} hold NaN or infinity"
+    metrics = model.metadata.get("metrics", {}) or {}
+    for name in ("val_loss", "train_loss"):
+        value = metrics.get(name)
+        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+            return f"its {name.replace('_', ' ')} is {value}"
+    return None
+
+
+def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
+    """``s -> plans(s, goal)``, shortest first, through the store's plan cache.
+
+    For a goal of several states (a knot) the plans lead to any member (one BFS over all of them).
+    """
+    from twisted.store.plans import cached_plans
+
+    target: Goal | PData = goal.states[0] if len(goal.states) == 1 else goal
+
+    def plans_from(start: PData) -> list[Any]:
+        return list(cached_plans(store, start, target, limit))
+
+    return plans_from
+
+
+def straight_rope() -> tuple[np.ndarray, np.ndarray, PData]:
+    """The default initial configuration: ``RopeSim.reset()`` (q, link points, Top(q))."""
+    from twisted.sim import RopeSim
+
+    sim = RopeSim()
+    sim.reset()
+    return sim.state(), sim.link_points(), sim.p_data()
+
+
+def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
+    return Node(index=0, parent=None, q=q, points=points, p_data=p_data, curve=None, iteration=0, sim_call=0)
+
+
+def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None = None) -> PlannerOptions:
+    """The options of a search from those asked for (a value of None: not given, the default).
+
+    For a resumed run ``stored`` (its ``runs.parameters``) holds, and every option given must agree
+    with it. Raises :class:`PlanInputError` naming the options that clash or are out of range.
+    """
+    asked = {name: value for name, value in given.items() if value is not None}
+    if stored is not None:
+        kept = PlannerOptions.from_dict(dict(stored)).to_dict()
+        clash = [f"--{n.replace('_', '-')} {v} (run has {kept[n]})" for n, v in asked.items() if kept[n] != v]
+        if clash:
+            message = f"a resumed run keeps its own search options; drop or fix: {', '.join(clash)}"
+            raise PlanInputError(message)
+        return PlannerOptions.from_dict(kept)
+    options = PlannerOptions(**asked)
+    try:
+        options.validate()
+    except ValueError as exc:
+        raise PlanInputError(str(exc)) from None
+    return options
+
+
+@dataclass(frozen=True)
+class RunChoice:
+    """What a plan command searches: the run to continue (``run_id``; None: a new run), with which
+    options and which model (None: the default one)."""
+
+    run_id: int | None
+    options: PlannerOptions
+    model_id: int | None
+
+
+def choose_run(
+    store: Any,
+    goal: Goal | None,
+    given: Mapping[str, Any],
+    *,
+    resume: bool,
+    run_id: int | None = None,
+    model_id: int | None = None,
+    start_config: int | None = None,
+) -> RunChoice:
+    """A new run or one to continue, and its options and model.
+
+    Without ``resume``: a new run with the options ``given`` (see :func:`planner_options`) and
+    ``model_id``. With ``resume``: run ``run_id``, by default the newest unfinished one (for ``goal``
+    when given); it must be a planner run for the same goal, neither solved nor still searched by a
+    live process, and it keeps its own options, start and model (those given must agree). Raises
+    :class:`PlanInputError` when the run cannot be continued.
+    """
+    if not resume:
+        return RunChoice(None, planner_options(given), model_id)
+    from twisted.store.search import find_resumable_run, load_run
+
+    if run_id is None:
+        run_id = find_resumable_run(store, goal)
+    if run_id is None:
+        raise PlanInputError(
+            "--resume: no unfinished planner run" + (f" for goal {goal.spec}" if goal is not None else "")
+        )
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"--resume {run_id}: there is no planner run {run_id} in this database")
+    if goal is not None and info.goal.spec != goal.spec:
+        raise PlanInputError(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal.spec}")
+    if start_config is not None:
+        raise PlanInputError("--start-config cannot change the start of a resumed run")
+    if info.outcome == "solved":
+        raise PlanInputError(
+            f"--resume {run_id}: run {run_id} already solved its goal (see `twisted replay {run_id}`)"
+        )
+    if info.holder is not None:
+        raise PlanInputError(
+            f"--resume {run_id}: run {run_id} is still being searched by {info.holder}; stop it first"
+        )
+    parameters = info.parameters
+    if model_id is not None and parameters.get("model_id") not in (None, model_id):
+        used = parameters.get("model_id")
+        raise PlanInputError(f"--model {model_id}: run {run_id} was searched with model {used}")
+    return RunChoice(run_id, planner_options(given, stored=parameters), parameters.get("model_id", model_id))
+
+
+class _Logged:
+    """A :class:`~twisted.planner.search.SearchRecorder` that logs each checkpoint and how the search
+    ended, after the store has them."""
+
+    def __init__(self, recorder: Any) -> None:
+        self.recorder = recorder
+        self.run_id: int = recorder.run_id
+
+    def save(self, nodes: Sequence[Node], checkpoint: Checkpoint) -> None:
+        self.recorder.save(nodes, checkpoint)
+        log.debug(
+            "run %d: checkpoint at iteration %d, %.1f s searched, %d simulator calls, %d new nodes",
+            self.run_id, checkpoint.iteration, checkpoint.elapsed_s, checkpoint.sim_calls, len(nodes),
+        )
+
+    def finish(self, status: str, goal_node: Node | None, checkpoint: Checkpoint) -> None:
+        self.recorder.finish(status, goal_node, checkpoint)
+        if goal_node is not None:
+            ended = f"reached the goal (state {goal_node.p_data.key}, node {goal_node.index})"
+        else:
+            ended = _ENDED.get(status, status)
+        log.info(
+            "run %d %s after %.1f s of search: %d simulator calls, %d iterations",
+            self.run_id, ended, checkpoint.elapsed_s, checkpoint.sim_calls, checkpoint.iteration,
+        )
+
+    def record_tightening(self, node: Node, result: Any, goal: Goal, ties_goal: bool) -> None:
+        self.recorder.record_tightening(node, result, goal, ties_goal)
+
+
+_ENDED = {
+    "timeout": "ran out of time",
+    "interrupted": "was interrupted (checkpoint saved)",
+    "stopped": "stopped at its iteration limit",
+}
+
+
+def _log_start(what: str, run_id: int, goal: Goal, options: PlannerOptions, model_id: Any) -> None:
+    log.info(
+        "run %d: %s for goal %s: planner %s, heuristic %s, model %s, seed %d, k %d, p_expand %g%s",
+        run_id, what, goal.spec, options.planner, options.heuristic,
+        _model_name(options.planner, model_id), options.seed, options.k, options.p_expand,
+        ", with pull test" if options.tighten else "",
+    )
+
+
+def _model_name(planner: str, model_id: Any) -> str:
+    if model_id is not None:
+        return str(model_id)
+    return "shipped" if planner == "twisted" else "none"
+
+
+def start_search(
+    store: Any,
+    goal: Goal | PData,
+    options: PlannerOptions,
+    pool: Pool,
+    sampler: CurveSampler | None = None,
+    start_configuration_id: int | None = None,
+    stop: StopSignals | None = None,
+    progress: Callable[[Twisted], None] | None = None,
+    extra_parameters: dict[str, Any] | None = None,
+) -> Twisted:
+    """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope or a stored configuration.
+
+    ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id).
+    """
+    from twisted.store.search import SearchRun
+
+    options.validate()
+    goal = goal if isinstance(goal, Goal) else state_goal(goal)
+    if start_configuration_id is None:
+        root = _root(*straight_rope())
+    else:
+        from sqlalchemy.exc import NoResultFound
+
+        from twisted.store.queries import load_configuration
+        from twisted.topology import top
+
+        with store.session() as session:
+            try:
+                config = load_configuration(session, start_configuration_id)
+            except NoResultFound:
+                message = f"configuration {start_configuration_id} is not in this database"
+                raise PlanInputError(message) from None
+            q, points = config.q_array(), config.points_array()
+        root = _root(q, points, top(points))
+    if root.p_data in goal:
+        raise PlanInputError(f"the initial configuration is already in the goal state {root.p_data.key}")
+    tree = SearchTree()
+    tree.add(root)
+    rng = np.random.default_rng(options.seed)
+    first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
+    parameters = {**options.to_dict(), **(extra_parameters or {})}
+    recorder = _Logged(SearchRun.create(store, goal, parameters, root, first, start_configuration_id))
+    start = "straight rope" if start_configuration_id is None else f"configuration {start_configuration_id}"
+    _log_start(f"new search from the {start}", recorder.run_id, goal, options, parameters.get("model_id"))
+    return Twisted(
+        goal,
+        tree,
+        options,
+        pool,
+        high_level(store, goal, options.plan_limit),
+        sampler=sampler,
+        recorder=recorder,
+        run_id=recorder.run_id,
+        stop=stop,
+        progress=progress,
+    )
+
+
+def tree_from_rows(rows: Sequence[Any]) -> SearchTree:
+    """Rebuild ``T`` from stored nodes (``twisted.store.search.StoredNode``, in ``seq`` order)."""
+    from twisted.sim import Curve
+
+    tree = SearchTree()
+    for row in rows:
+        curve = None if row.curve is None else Curve(*row.curve)
+        node = Node(
+            index=row.seq,
+            parent=row.parent_seq,
+            q=row.q,
+            points=row.points,
+            p_data=row.p_data,
+            curve=curve,
+            iteration=row.iteration,
+            sim_call=row.sim_call,
+            created_s=row.created_s,
+            db_id=row.id,
+        )
+        tree.add(node)
+    return tree
+
+
+def resume_search(
+    store: Any,
+    run_id: int,
+    pool: Pool,
+    sampler: CurveSampler | None = None,
+    stop: StopSignals | None = None,
+    progress: Callable[[Twisted], None] | None = None,
+) -> Twisted:
+    """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
+    from twisted.store.search import RunBusyError, SearchRun, discard_after_checkpoint, load_run, take_lease
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"run {run_id} is not a planner run in this database")
+    if info.checkpoint is None:
+        raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
+    try:
+        take_lease(store, run_id)  # from here on this process is the run's one writer
+    except (LookupError, RunBusyError) as exc:
+        raise PlanInputError(str(exc)) from None
+    discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
+    info = load_run(store, run_id)
+    assert info is not None and info.checkpoint is not None
+    options = PlannerOptions.from_dict(info.parameters)
+    tree = tree_from_rows(info.nodes)
+    checkpoint = Checkpoint(
+        iteration=info.checkpoint.iteration,
+        elapsed_s=info.checkpoint.elapsed_s,
+        sim_calls=info.checkpoint.sim_calls,
+        rng_state=info.checkpoint.rng_state,
+        stats=info.checkpoint.stats,
+    )
+    node_ids = {node.index: node.db_id for node in tree.nodes if node.db_id is not None}
+    recorder = _Logged(SearchRun(store, run_id, node_ids))
+    resumed = f"resumed at iteration {checkpoint.iteration} ({checkpoint.elapsed_s:.1f} s searched)"
+    _log_start(resumed, run_id, info.goal, options, info.parameters.get("model_id"))
+    return Twisted(
+        info.goal,
+        tree,
+        options,
+        pool,
+        high_level(store, info.goal, options.plan_limit),
+        sampler=sampler,
+        recorder=recorder,
+        checkpoint=checkpoint,
+        run_id=run_id,
+        stop=stop,
+        progress=progress,
+    )
+
+
+@dataclass
+class ReplayStep:
+    curve: Any
+    recorded: PData
+    replayed: PData | None  # None: the simulator rejected the result
+    reason: str | None = None
+
+    @property
+    def matches(self) -> bool:
+        return self.replayed == self.recorded
+
+
+@dataclass
+class ReplayResult:
+    run_id: int
+    goal: Goal
+    steps: list[ReplayStep]
+    # with tighten=True: the pull test of the replayed final rope (None when it was not run)
+    tightened: Any = None
+
+    @property
+    def reached_goal(self) -> bool:
+        return bool(self.steps) and self.steps[-1].replayed in self.goal
+
+    @property
+    def ties_goal(self) -> bool:
+        """The replayed rope reached the goal and, pulled tight, ties the goal's knot."""
+        t = self.tightened
+        return self.reached_goal and t is not None and t.ok and self.goal.tightened_ties(t.knot_name)
+
+
+def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool = False) -> ReplayResult:
+    """Re-simulate a solved run's plan from its initial configuration, in this process.
+
+    ``tighten``: then pull the final rope tight (:mod:`twisted.tighten`) and store the pull test with
+    the run (table ``tightenings``).
+    """
+    from twisted.sim import Curve, RopeSim
+    from twisted.sim.pool import simulate
+    from twisted.store.search import load_run, solution_path
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"run {run_id} is not a planner run in this database")
+    path = solution_path(store, run_id)
+    if not path:
+        raise PlanInputError(f"run {run_id} has no plan to replay (outcome: {info.outcome})")
+    sim = RopeSim(friction_scale)
+    state = path[0].q
+    steps = []
+    final_p_data = None
+    for node in path[1:]:
+        assert node.curve is not None
+        curve = Curve(*node.curve)
+        result = simulate(sim, state, curve)
+        steps.append(ReplayStep(curve, node.p_data, result.p_data if result.ok else None, result.reason))
+        if result.state is None:
+            break
+        state, final_p_data = result.state, result.p_data
+    out = ReplayResult(run_id, info.goal, steps)
+    if tighten and final_p_data is not None:
+        from twisted.tighten import tighten as pull
+        from twisted.tighten import tightening_sim
+        from twisted.store.knots import record_tightening
+
+        out.tightened = pull(tightening_sim(friction_scale), state)
+        goal = info.goal
+        with store.session(write=True) as session:
+            record_tightening(
+                session, out.tightened, final_p_data, run_id=run_id, node_seq=path[-1].seq,
+                goal_knot=goal.knot_label,
+                ties_goal=out.ties_goal,
+            )
+    return out
