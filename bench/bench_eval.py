@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy import select
 
-from twisted.evaluate import import_problem_sets, run_eval
+from twisted.experiments import import_problem_sets, run_eval
 from twisted.moves import enumerate_states
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult

@@ -17,19 +17,16 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.evaluate import (
+from twisted.experiments.discretise import round_curve, run_discretisation
+from twisted.experiments.problems import (
     EvalInputError,
-    load_results,
     make_problem_sets_in_store,
     parse_goal_file,
     rank_by_frequency,
-    round_curve,
-    run_discretisation,
-    run_eval,
     split_thirds,
-    success_curve,
-    write_report,
 )
+from twisted.experiments.report import load_results, success_curve, write_report
+from twisted.experiments.runner import run_eval
 from twisted.goals import state_goal
 from twisted.moves import enumerate_states, successors
 from twisted.store import open_store
