@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -24,6 +24,9 @@ from cli.app import (
     seed_option,
     shorten,
 )
+
+if TYPE_CHECKING:
+    from twisted.experiments import EvalOptions
 
 MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
 
@@ -174,25 +177,13 @@ def problems_list(
 
 
 def _eval(
-    ctx: typer.Context,
-    set_name: str,
-    planner: str,
-    timeout_s: float,
-    workers: int,
-    seeds: list[int],
-    friction_scale: float,
-    parallel: int,
-    options: dict[str, Any],
-    label: str | None,
-    use_ray: bool = False,
-    ray_address: str | None = None,
+    ctx: typer.Context, request: EvalOptions, use_ray: bool = False, ray_address: str | None = None
 ) -> Any:
     from twisted.distributed import DistributedError, RayBackend
     from twisted.experiments import EvalInputError, run_eval
 
-
     columns = (
-        TextColumn(f"[bold]{set_name} / {planner} / friction {friction_scale:g}"),
+        TextColumn(f"[bold]{request.set_name} / {request.planner} / friction {request.friction_scale:g}"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("solved {task.fields[solved]}"),
@@ -217,18 +208,10 @@ def _eval(
             summary = run_eval(
                 store,
                 db_url(ctx),
-                set_name,
-                planner,
-                timeout_s=timeout_s,
-                seeds=seeds,
-                friction_scale=friction_scale,
-                workers=workers,
-                parallel=parallel,
-                options=options,
-                label=label,
+                request,
+                backend=RayBackend(ray_address) if use_ray else None,  # --ray: the same tasks as Ray tasks
                 on_start=on_start,
                 on_outcome=on_outcome,
-                backend=RayBackend(ray_address) if use_ray else None,  # --ray: the same tasks as Ray tasks
             )
         except (EvalInputError, DistributedError) as exc:
             fail(str(exc))
@@ -324,6 +307,7 @@ def eval_command(
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
     from twisted.distributed import DistributedError, import_ray, resolve_address
+    from twisted.experiments import EvalOptions
 
     try:
         ray_address = resolve_address(use_ray, ray_address)
@@ -335,20 +319,11 @@ def eval_command(
     if not use_ray:
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
-    _eval(
-        ctx,
-        set_name,
-        planner,
-        timeout_s,
-        workers,
-        _parse_seeds(seeds),
-        friction_scale,
-        parallel,
-        _planner_options(heuristic, model_id),
-        label,
-        use_ray,
-        ray_address,
+    options = _planner_options(heuristic, model_id)
+    request = EvalOptions(
+        set_name, planner, timeout_s, _parse_seeds(seeds), friction_scale, workers, parallel, options, label
     )
+    _eval(ctx, request, use_ray, ray_address)
 
 
 @app.command("report")
@@ -388,7 +363,7 @@ def sensitivity_run(
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
-    from twisted.experiments import EvalInputError
+    from twisted.experiments import EvalInputError, EvalOptions
     from twisted.experiments.sensitivity import check_scales
 
     try:
@@ -398,20 +373,10 @@ def sensitivity_run(
     check_workers(workers)
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
-    options = _planner_options(heuristic, model_id)
+    picked, options = _parse_seeds(seeds), _planner_options(heuristic, model_id)
     for scale in chosen:
-        _eval(
-            ctx,
-            set_name,
-            planner,
-            timeout_s,
-            workers,
-            _parse_seeds(seeds),
-            scale,
-            parallel,
-            options,
-            label,
-        )
+        request = EvalOptions(set_name, planner, timeout_s, picked, scale, workers, parallel, options, label)
+        _eval(ctx, request)
 
 
 @sensitivity_app.command("plot")

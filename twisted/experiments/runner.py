@@ -47,6 +47,7 @@ from twisted.store.models import utcnow
 
 __all__ = [
     "EvalBackend",
+    "EvalOptions",
     "EvalSummary",
     "EvalTask",
     "PreparedEval",
@@ -261,6 +262,21 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
 
 
 @dataclass(frozen=True)
+class EvalOptions:
+    """What one evaluation runs (``twisted eval``'s options); checked by :func:`prepare_eval`."""
+
+    set_name: str
+    planner: str  # the planner kind (a key of ``twisted.planner.PLANNERS``)
+    timeout_s: float  # search time per (goal, seed)
+    seeds: Sequence[int] = (0,)
+    friction_scale: float = 1.0
+    workers: int = 1  # simulator processes per planner (1 = in-process)
+    parallel: int | None = None  # tasks at once; None: the backend's smallest (``min_parallel``)
+    planner_options: Mapping[str, Any] | None = None  # e.g. heuristic, model_id
+    label: str | None = None  # what the results are stored under (default: planner[-heuristic])
+
+
+@dataclass(frozen=True)
 class PreparedEval:
     """The checked inputs of one evaluation (:func:`run_eval`)."""
 
@@ -273,6 +289,7 @@ class PreparedEval:
     seeds: Sequence[int]
     friction_scale: float
     workers: int
+    parallel: int  # tasks at once (0: as many as the backend has room for)
 
     @property
     def total(self) -> int:
@@ -303,28 +320,19 @@ class PreparedEval:
         return EvalSummary(eval_run_id, self.set_name, self.label, self.total, done), tasks
 
 
-def prepare_eval(
-    store: Any,
-    set_name: str,
-    planner: str,
-    *,
-    timeout_s: float,
-    seeds: Sequence[int],
-    friction_scale: float,
-    workers: int,
-    parallel: int,
-    options: Mapping[str, Any] | None,
-    label: str | None,
-    min_parallel: int = 1,
-) -> PreparedEval:
+def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> PreparedEval:
     """Check an evaluation's inputs, pick its label, load its model id and problem set.
 
     Raises :class:`EvalInputError` naming the first bad input, before any process or task starts.
-    ``parallel`` must be at least ``min_parallel``: 1 for local processes, 0 on Ray (0 there means
-    as many tasks as the cluster's CPUs allow). The default label is the planner kind, plus
-    ``-<heuristic>`` when ``options`` choose one.
+    ``parallel`` must be at least ``min_parallel`` (its default): 1 for local processes, 0 on Ray (0
+    there means as many tasks as the cluster's CPUs allow). The default label is the planner kind,
+    plus ``-<heuristic>`` when the planner options choose one.
     """
     from twisted.planner import PLANNERS
+
+    set_name, planner, timeout_s, seeds = request.set_name, request.planner, request.timeout_s, request.seeds
+    friction_scale, workers, label = request.friction_scale, request.workers, request.label
+    parallel = min_parallel if request.parallel is None else request.parallel
 
     if planner not in PLANNERS:
         raise EvalInputError(f"unknown planner {planner!r}: choose from {', '.join(PLANNERS)}")
@@ -340,7 +348,7 @@ def prepare_eval(
         )
     if not seeds:
         raise EvalInputError("give at least one seed")
-    options = dict(options or {})
+    options = dict(request.planner_options or {})
     if label is None:
         label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
     if not label or len(label) > 32:
@@ -366,6 +374,7 @@ def prepare_eval(
         seeds=seeds,
         friction_scale=friction_scale,
         workers=workers,
+        parallel=parallel,
     )
 
 
@@ -634,42 +643,20 @@ def schedule(
 def run_eval(
     store: Any,
     db_url: str,
-    set_name: str,
-    planner: str,
+    request: EvalOptions,
     *,
-    timeout_s: float,
-    seeds: Sequence[int] = (0,),
-    friction_scale: float = 1.0,
-    workers: int = 1,
-    parallel: int | None = None,
-    options: Mapping[str, Any] | None = None,
-    label: str | None = None,
+    backend: EvalBackend | None = None,
     on_outcome: Callable[[TaskOutcome, EvalSummary], None] | None = None,
     on_start: Callable[[EvalSummary, int], None] | None = None,
-    backend: EvalBackend | None = None,
 ) -> EvalSummary:
     """Run every (goal, seed) of a set not already finished; outcomes are stored as they come.
 
-    Results are stored under ``label`` (default: the planner kind, plus ``-<heuristic>`` when
-    ``options`` choose one), so variants of one planner are told apart in the report. ``backend``:
-    where the tasks run (default :class:`ProcessBackend`); ``parallel``: tasks at once (default
-    ``backend.min_parallel``: 1 process locally, as many as the cluster's CPUs allow on Ray). Stops
-    as :func:`schedule` says; running the same command again continues.
+    Results are stored under ``request.label`` (default: the planner kind, plus ``-<heuristic>`` when
+    the planner options choose one), so variants of one planner are told apart in the report.
+    ``backend``: where the tasks run (default :class:`ProcessBackend`). Stops as :func:`schedule`
+    says; running the same eval again continues.
     """
     chosen: EvalBackend = backend if backend is not None else ProcessBackend()
-    parallel = chosen.min_parallel if parallel is None else parallel
-    prepared = prepare_eval(
-        store,
-        set_name,
-        planner,
-        timeout_s=timeout_s,
-        seeds=seeds,
-        friction_scale=friction_scale,
-        workers=workers,
-        parallel=parallel,
-        options=options,
-        label=label,
-        min_parallel=chosen.min_parallel,
-    )
-    with chosen.open(store, db_url, workers, parallel) as pool:
+    prepared = prepare_eval(store, request, chosen.min_parallel)
+    with chosen.open(store, db_url, prepared.workers, prepared.parallel) as pool:
         return schedule(store, prepared, pool, backend=chosen.name, on_outcome=on_outcome, on_start=on_start)
