@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy import select
 
-from twisted.evaluate import import_problem_sets, run_eval
+from twisted.experiments import EvalOptions, import_problem_sets, run_eval
 from twisted.moves import enumerate_states
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult
@@ -39,15 +39,14 @@ def main() -> None:
             goals = [p.to_list() for p in enumerate_states(1)[1]]
             import_problem_sets(store, json.dumps(goals), "one-crossing")
             t0 = time.perf_counter()
-            summary = run_eval(
-                store,
-                url,
+            request = EvalOptions(
                 "one-crossing",
                 "random-low",
                 timeout_s=args.timeout,
                 seeds=list(range(args.seeds)),
                 parallel=args.parallel,
             )
+            summary = run_eval(store, url, request)
             wall = time.perf_counter() - t0
             with store.session() as session:
                 rows = session.scalars(select(EvalResult).order_by(EvalResult.id)).all()

@@ -3,11 +3,10 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -25,6 +24,9 @@ from cli.app import (
     seed_option,
     shorten,
 )
+
+if TYPE_CHECKING:
+    from twisted.experiments import EvalOptions
 
 MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
 
@@ -71,7 +73,8 @@ def problems_make(
     ] = None,
 ) -> None:
     """Make easy/medium/hard (3-crossing states by visit frequency), unseen-3 and 4 from our data."""
-    from twisted.evaluate import ALL_MADE_SETS, EvalInputError, make_problem_sets_in_store
+    from twisted.experiments import EvalInputError, make_problem_sets_in_store
+    from twisted.experiments.problems import ALL_MADE_SETS
 
     with open_db(ctx) as store:
         try:
@@ -92,7 +95,7 @@ def problems_import(
     ),
 ) -> None:
     """Import goal sets from a JSON file (every state is checked; nothing is stored on an error)."""
-    from twisted.evaluate import EvalInputError, import_problem_sets
+    from twisted.experiments import EvalInputError, import_problem_sets
 
     try:
         text = file.read_text()
@@ -116,7 +119,7 @@ def problems_knots(
     name: str = typer.Option(..., "--name", help="Name of the new set."),
 ) -> None:
     """Make a set of knot goals: each is reached by any rope state that ties the knot."""
-    from twisted.evaluate import EvalInputError, save_goal_sets
+    from twisted.experiments import EvalInputError, save_goal_sets
     from twisted.goals import GoalError, goal_from_spec
 
     goals = []
@@ -174,27 +177,13 @@ def problems_list(
 
 
 def _eval(
-    ctx: typer.Context,
-    set_name: str,
-    planner: str,
-    timeout_s: float,
-    workers: int,
-    seeds: list[int],
-    friction_scale: float,
-    parallel: int,
-    options: dict[str, Any],
-    label: str | None,
-    use_ray: bool = False,
-    ray_address: str | None = None,
+    ctx: typer.Context, request: EvalOptions, use_ray: bool = False, ray_address: str | None = None
 ) -> Any:
-    from twisted.distributed import DistributedError, eval_on_ray
-    from twisted.evaluate import EvalInputError, run_eval
-
-    # --ray: the same tasks as Ray tasks (twisted/distributed.py)
-    runner = functools.partial(eval_on_ray, address=ray_address) if use_ray else run_eval
+    from twisted.distributed import DistributedError, RayBackend
+    from twisted.experiments import EvalInputError, run_eval
 
     columns = (
-        TextColumn(f"[bold]{set_name} / {planner} / friction {friction_scale:g}"),
+        TextColumn(f"[bold]{request.set_name} / {request.planner} / friction {request.friction_scale:g}"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("solved {task.fields[solved]}"),
@@ -216,18 +205,11 @@ def _eval(
                 err_console.print(f"goal {outcome.goal_key} seed {outcome.seed} failed: {outcome.message}")
 
         try:
-            summary = runner(
+            summary = run_eval(
                 store,
                 db_url(ctx),
-                set_name,
-                planner,
-                timeout_s=timeout_s,
-                seeds=seeds,
-                friction_scale=friction_scale,
-                workers=workers,
-                parallel=parallel,
-                options=options,
-                label=label,
+                request,
+                backend=RayBackend(ray_address) if use_ray else None,  # --ray: the same tasks as Ray tasks
                 on_start=on_start,
                 on_outcome=on_outcome,
             )
@@ -327,6 +309,7 @@ def eval_command(
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
     from twisted.distributed import DistributedError, import_ray, resolve_address
+    from twisted.experiments import EvalOptions
 
     try:
         ray_address = resolve_address(use_ray, ray_address)
@@ -338,20 +321,11 @@ def eval_command(
     if not use_ray:
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
-    _eval(
-        ctx,
-        set_name,
-        planner,
-        timeout_s,
-        workers,
-        _parse_seeds(seeds),
-        friction_scale,
-        parallel,
-        _planner_options(heuristic, model_id),
-        label,
-        use_ray,
-        ray_address,
+    options = _planner_options(heuristic, model_id)
+    request = EvalOptions(
+        set_name, planner, timeout_s, _parse_seeds(seeds), friction_scale, workers, parallel, options, label
     )
+    _eval(ctx, request, use_ray, ray_address)
 
 
 @app.command("report")
@@ -363,7 +337,7 @@ def report_command(
     sets: Annotated[list[str] | None, typer.Option("--set", help="Only these sets (repeatable).")] = None,
 ) -> None:
     """Success-vs-time curves (PNG, one per set) and a Markdown table from the stored results."""
-    from twisted.evaluate import write_report
+    from twisted.experiments import write_report
 
     with open_db(ctx) as store:
         files = write_report(store, out, sets or None)
@@ -391,26 +365,20 @@ def sensitivity_run(
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
-    for scale in scales or []:
-        if not 0.01 <= scale <= 100:
-            fail(f"--scales: {scale:g} is not a friction factor in 0.01 .. 100")
+    from twisted.experiments import EvalInputError, EvalOptions
+    from twisted.experiments.sensitivity import check_scales
+
+    try:
+        chosen = check_scales(scales)
+    except EvalInputError as exc:
+        fail(str(exc))
     check_workers(workers)
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
-    options = _planner_options(heuristic, model_id)
-    for scale in scales or [0.95, 1.0, 1.05]:
-        _eval(
-            ctx,
-            set_name,
-            planner,
-            timeout_s,
-            workers,
-            _parse_seeds(seeds),
-            scale,
-            parallel,
-            options,
-            label,
-        )
+    picked, options = _parse_seeds(seeds), _planner_options(heuristic, model_id)
+    for scale in chosen:
+        request = EvalOptions(set_name, planner, timeout_s, picked, scale, workers, parallel, options, label)
+        _eval(ctx, request)
 
 
 @sensitivity_app.command("plot")
@@ -420,7 +388,7 @@ def sensitivity_plot(
     sets: Annotated[list[str] | None, typer.Option("--set", help="Only these sets (repeatable).")] = None,
 ) -> None:
     """Friction plots (one line per scale) for every set/planner evaluated at several scales."""
-    from twisted.evaluate import write_report
+    from twisted.experiments import write_report
 
     with open_db(ctx) as store:
         files = write_report(store, out, sets or None)
@@ -450,7 +418,8 @@ def discretise_command(
     ),
 ) -> None:
     """Discretisation experiment (paper 5.1): share of transitions whose state changes when rounded."""
-    from twisted.evaluate import PAPER_DISCRETISATION_CHANGED, EvalInputError, run_discretisation
+    from twisted.experiments import EvalInputError, run_discretisation
+    from twisted.experiments.discretise import PAPER_DISCRETISATION_CHANGED
 
     check_workers(workers or None)
     workers = workers or _default_parallel()

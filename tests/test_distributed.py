@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 from tests.collect_checks import check_collect_rows, replay_some
 from twisted.collect import CollectOptions, CollectProgress
+from twisted.experiments.runner import EvalOptions, run_eval
 from twisted.store import CollectBatch, Run, Transition, open_store
 from twisted.store.experiments import EvalResult, ProblemRecord, save_problem_set
 from twisted.topology import parse_p_data
@@ -24,8 +25,8 @@ ray = pytest.importorskip("ray")
 
 from twisted.distributed import (  # noqa: E402 - after the skip: needs ray
     DistributedError,
+    RayBackend,
     collect_on_ray,
-    eval_on_ray,
     ray_cluster,
     resolve_address,
 )
@@ -225,9 +226,9 @@ def test_eval_tasks_on_ray_store_one_row_each_and_rerun_skips_them(
 ) -> None:
     url = request.getfixturevalue("sqlite_url" if backend == "sqlite" else "postgres_url")
     _two_goal_set(url)
-    kwargs: dict[str, Any] = {"timeout_s": 1.5, "seeds": [0, 1], "workers": 1}
+    request = EvalOptions("ones", "random-low", timeout_s=1.5, seeds=[0, 1], workers=1)
     with open_store(url) as store:
-        summary = eval_on_ray(store, url, "ones", "random-low", **kwargs)
+        summary = run_eval(store, url, request, backend=RayBackend())
         assert summary.status == "finished" and summary.total == 4
         assert sorted((o.goal_key, o.seed) for o in summary.outcomes) == sorted(
             (g.key, s) for g in (ONE, ONE_UNDER) for s in (0, 1)
@@ -238,7 +239,7 @@ def test_eval_tasks_on_ray_store_one_row_each_and_rerun_skips_them(
             hosts_pids = {(r.host, r.pid) for r in rows}
         assert len(rows) == 4 and all(r.status in ("solved", "timeout") for r in rows)
         assert all(pid != os.getpid() for _, pid in hosts_pids)  # run by Ray workers, not here
-        again = eval_on_ray(store, url, "ones", "random-low", **kwargs)
+        again = run_eval(store, url, request, backend=RayBackend())
     assert again.already_done == 4 and again.outcomes == []
 
 

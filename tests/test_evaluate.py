@@ -17,19 +17,16 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.evaluate import (
+from twisted.experiments.discretise import round_curve, run_discretisation
+from twisted.experiments.problems import (
     EvalInputError,
-    load_results,
     make_problem_sets_in_store,
     parse_goal_file,
     rank_by_frequency,
-    round_curve,
-    run_discretisation,
-    run_eval,
     split_thirds,
-    success_curve,
-    write_report,
 )
+from twisted.experiments.report import load_results, success_curve, write_report
+from twisted.experiments.runner import EvalOptions, run_eval
 from twisted.goals import state_goal
 from twisted.moves import enumerate_states, successors
 from twisted.store import open_store
@@ -208,9 +205,9 @@ def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
         def interrupt(outcome, summary) -> None:
             raise KeyboardInterrupt  # what Ctrl-C raises in the parent, after the first goal is stored
 
-        kwargs = {"timeout_s": 1.5, "seeds": [0], "parallel": 1, "workers": 1}
+        request = EvalOptions("ones", "random-low", timeout_s=1.5, seeds=[0], parallel=1, workers=1)
         with pytest.raises(KeyboardInterrupt):
-            run_eval(store, db_url, "ones", "random-low", on_outcome=interrupt, **kwargs)
+            run_eval(store, db_url, request, on_outcome=interrupt)
         with store.session() as session:
             first = session.scalars(select(EvalResult)).all()
             runs = session.scalars(select(EvalRun)).all()
@@ -218,7 +215,7 @@ def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
         assert first[0].plan_run_id is not None and first[0].sim_calls is not None
         assert [r.status for r in runs] == ["interrupted"]
 
-        summary = run_eval(store, db_url, "ones", "random-low", **kwargs)
+        summary = run_eval(store, db_url, request)
         assert summary.already_done == 1
         assert [o.goal_key for o in summary.outcomes] == [ONE_UNDER.key]  # only the missing goal ran
         with store.session() as session:
@@ -233,7 +230,7 @@ def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
         assert len(plan_runs) == 2  # one planner run per goal, none repeated
 
         # a third invocation has nothing left to do
-        assert run_eval(store, db_url, "ones", "random-low", **kwargs).outcomes == []
+        assert run_eval(store, db_url, request).outcomes == []
         with store.session() as session:
             for r in load_results(session):
                 # the goal node's simulation, read from the planner's tree, for solved goals only
@@ -296,7 +293,8 @@ def test_sigint_mid_goal_checkpoints_and_resumes_the_same_planner_run(
                 run_status = session.scalar(select(EvalRun.status))
             assert row.status == "interrupted" and run_status == "interrupted"
             plan_run, elapsed = row.plan_run_id, row.elapsed_s
-            summary = run_eval(store, sqlite_url, "hard1", "random-low", timeout_s=12.0, parallel=1)
+            request = EvalOptions("hard1", "random-low", timeout_s=12.0, parallel=1)
+            summary = run_eval(store, sqlite_url, request)
             # it fails to solve in the remaining time or solves it; either way the same planner run continued
             with store.session() as session:
                 row = session.scalar(select(EvalResult))

@@ -10,7 +10,7 @@ from sqlalchemy import select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.evaluate import parse_goal_file
+from twisted.experiments.problems import parse_goal_file
 from twisted.goals import Goal, GoalError, PlanInputError, goal_from_spec, knot_goal, make_goal, state_goal
 from twisted.knots import identify
 from twisted.moves import Plan, enumerate_states, plans, plans_to_any

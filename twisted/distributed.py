@@ -1,6 +1,6 @@
 """Collection and evaluation on a Ray cluster (``twisted collect --ray``, ``twisted eval --ray``).
 
-The same work as :mod:`twisted.collect` and :mod:`twisted.evaluate`, the same database and schema, but
+The same work as :mod:`twisted.collect` and :mod:`twisted.experiments`, the same database and schema, but
 the simulators run in Ray workers that may sit on other machines. Ray (and psycopg for PostgreSQL) are
 optional extras: ``pip install 'twisted-knots[distributed]'``; ray is imported only when used.
 
@@ -26,9 +26,10 @@ retry's batch id is already stored and it is a no-op, so nothing is stored twice
 spent the run goes on with the remaining workers. The summary's counters are read back from the
 database, so they are what was committed.
 
-Eval. Each (goal, seed) of :func:`twisted.evaluate.run_eval` becomes one Ray task
-(``twisted.evaluate.run_task``, ``num_cpus = workers``) that writes its own result row, as the local
-processes do; Ctrl-C cancels the tasks (their planners checkpoint) and a rerun continues.
+Eval. :class:`RayBackend` is the eval scheduler's Ray backend: each (goal, seed) of
+:func:`twisted.experiments.runner.run_eval` becomes one Ray task (``run_task``, ``num_cpus = workers``)
+that writes its own result row, as the local processes do; Ctrl-C cancels the tasks (their planners
+checkpoint) and a rerun continues.
 
 SQLite with Ray works on one machine (the database file must be readable at the same path by every
 worker); for a cluster of several machines use PostgreSQL (README: "Collecting on a Ray cluster").
@@ -40,7 +41,7 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
@@ -56,7 +57,6 @@ from twisted.collect import (
     CollectRun,
     CollectSummary,
 )
-from twisted.runtime import sigterm_as_interrupt
 from twisted.store import Run, Store
 from twisted.store.db import sqlite_path
 from twisted.store.queries import BatchRecord, add_collect_batch, batch_id
@@ -376,119 +376,101 @@ def _collect(
 # --- eval -------------------------------------------------------------------------------------------------
 
 
-def eval_on_ray(
-    store: Store,
-    db_url: str,
-    set_name: str,
-    planner: str,
-    *,
-    timeout_s: float,
-    seeds: Sequence[int] = (0,),
-    friction_scale: float = 1.0,
-    workers: int = 1,
-    parallel: int = 0,
-    options: Mapping[str, Any] | None = None,
-    label: str | None = None,
-    on_outcome: Callable[[Any, Any], None] | None = None,
-    on_start: Callable[[Any, int], None] | None = None,
-    address: str | None = None,
-    max_retries: int = 1,
-) -> Any:
-    """:func:`twisted.evaluate.run_eval` with each (goal, seed) as a Ray task; returns its ``EvalSummary``.
+@dataclass(frozen=True)
+class RayBackend:
+    """The eval backend that runs each (goal, seed) as a Ray task (``run_eval(..., backend=RayBackend())``).
 
-    Same arguments and stored rows as ``run_eval``. Each task takes ``workers`` CPUs (the planner's
-    simulator processes); ``parallel`` caps the tasks in flight (0: as many as the cluster's CPUs
-    allow). A task whose worker died is retried ``max_retries`` times (the planner resumes from its
-    checkpoint); after that its result row is marked ``interrupted`` so that a rerun picks it up.
-    Ctrl-C / SIGTERM cancel the tasks (their planners checkpoint) and mark the eval run interrupted.
+    Each task takes ``workers`` CPUs (the planner's simulator processes); ``parallel`` caps the tasks in
+    flight (0: as many as the cluster's CPUs allow). A task whose worker died is retried
+    ``max_retries`` times (the planner resumes from its checkpoint); after that its result row is
+    marked ``interrupted`` so that a rerun picks it up.
     """
-    from twisted.evaluate import TaskOutcome, prepare_eval, result_key, run_task
-    from twisted.store.experiments import EvalResult, end_eval_run
 
-    prepared = prepare_eval(
-        store,
-        set_name,
-        planner,
-        timeout_s=timeout_s,
-        seeds=seeds,
-        friction_scale=friction_scale,
-        workers=workers,
-        parallel=parallel,
-        options=options,
-        label=label,
-        min_parallel=0,
-    )
-    with ray_cluster(address) as ray:
-        cpus = cluster_cpus(ray)
-        if workers > cpus:
-            raise DistributedError(
-                f"--workers {workers} is more than the {cpus} CPUs of the Ray cluster (one task per goal "
-                "takes --workers CPUs)"
-            )
-        in_flight = parallel or max(1, cpus // workers)
-        summary, tasks = prepared.start(store, in_flight, {"ray": {"address": address, "cpus": cpus}})
-        eval_run_id = summary.eval_run_id
-        if on_start is not None:
-            on_start(summary, len(tasks))
+    address: str | None = None
+    max_retries: int = 1
+    name = "Ray"
+    min_parallel = 0
+
+    @contextmanager
+    def open(self, store: Store, db_url: str, workers: int, parallel: int) -> Iterator[_RayTaskPool]:
+        """Connect to (or start) the cluster; a pool of Ray tasks for the block."""
+        with ray_cluster(self.address) as ray:
+            cpus = cluster_cpus(ray)
+            if workers > cpus:
+                raise DistributedError(
+                    f"--workers {workers} is more than the {cpus} CPUs of the Ray cluster (one task per goal "
+                    "takes --workers CPUs)"
+                )
+            url = worker_url(store) if sqlite_path(store.url) is not None else db_url
+            in_flight = parallel or max(1, cpus // workers)
+            parameters = {"ray": {"address": self.address, "cpus": cpus}}
+            yield _RayTaskPool(ray, store, url, workers, self.max_retries, in_flight, parameters)
+
+
+class _RayTaskPool:
+    """Eval tasks in flight as Ray tasks (the :class:`twisted.experiments.runner.TaskPool` of Ray)."""
+
+    def __init__(
+        self,
+        ray: Any,
+        store: Store,
+        url: str,
+        workers: int,
+        max_retries: int,
+        in_flight: int,
+        parameters: dict[str, Any],
+    ) -> None:
+        from twisted.experiments.runner import run_task
+
+        self.ray, self.store, self.url = ray, store, url
+        self.in_flight, self.parameters = in_flight, parameters
+        self._remote = ray.remote(num_cpus=workers, max_retries=max_retries)(run_task)
         gone_errors, task_errors = _ray_errors(ray)
-        remote_task = ray.remote(num_cpus=workers, max_retries=max_retries)(run_task)
-        url = worker_url(store) if sqlite_path(store.url) is not None else db_url
-        queued = list(reversed(tasks))
-        pending: dict[Any, Any] = {}
-        status, message = "finished", None
-        with sigterm_as_interrupt():  # SIGTERM: stop like Ctrl-C
-            try:
-                while queued or pending:
-                    while queued and len(pending) < in_flight:
-                        task = queued.pop()
-                        pending[remote_task.remote(url, task)] = task
-                    ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
-                    for ref in ready:
-                        task = pending.pop(ref)
-                        try:
-                            outcome = ray.get(ref)
-                        except (*gone_errors, *task_errors) as exc:
-                            first_line = str(exc).strip().splitlines()[0][:300]
-                            text = f"Ray task lost ({type(exc).__name__}): {first_line}"
-                            with store.session(write=True) as session:
-                                # the worker died holding the row: free it for a rerun
-                                session.execute(
-                                    update(EvalResult)
-                                    .where(result_key(task) & (EvalResult.status == "running"))
-                                    .values(status="interrupted", message=text)
-                                )
-                            outcome = TaskOutcome(task.goal_key, task.seed, "failed", message=text)
-                        summary.outcomes.append(outcome)
-                        if on_outcome is not None:
-                            on_outcome(outcome, summary)
-            except BaseException as exc:
-                status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
-                message = None if status == "interrupted" else repr(exc)
-                _cancel_tasks(ray, pending, summary, TaskOutcome)
-                raise
-            finally:
-                summary.status = status
-                with store.session(write=True) as session:
-                    end_eval_run(session, eval_run_id, status, message)
-    return summary
+        self._lost = (*gone_errors, *task_errors)
+        self._pending: dict[Any, Any] = {}  # object ref -> EvalTask
 
+    @property
+    def running(self) -> int:
+        return len(self._pending)
 
-def _cancel_tasks(ray: Any, pending: dict[Any, Any], summary: Any, outcome_type: Any) -> None:
-    """Ask running tasks to stop (KeyboardInterrupt in the task: the planner checkpoints), wait for them."""
-    for ref in pending:
-        ray.cancel(ref, force=False)
-    deadline = time.monotonic() + 60.0
-    while pending and time.monotonic() < deadline:
-        ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
+    def submit(self, task: Any) -> None:
+        self._pending[self._remote.remote(self.url, task)] = task
+
+    def wait(self, timeout_s: float) -> list[Any]:
+        from twisted.experiments.runner import TaskOutcome, free_row
+
+        outcomes = []
+        ready, _ = self.ray.wait(list(self._pending), num_returns=1, timeout=timeout_s)
         for ref in ready:
-            task = pending.pop(ref)
+            task = self._pending.pop(ref)
             try:
-                summary.outcomes.append(ray.get(ref))
-            except Exception:  # noqa: BLE001 - cancelled before it started, or died: nothing stored
-                summary.outcomes.append(outcome_type(task.goal_key, task.seed, "interrupted"))
-    for ref in pending:
-        ray.cancel(ref, force=True)
-    pending.clear()
+                outcomes.append(self.ray.get(ref))
+            except self._lost as exc:
+                text = f"Ray task lost ({type(exc).__name__}): {str(exc).strip().splitlines()[0][:300]}"
+                free_row(self.store, task, text)  # the worker died holding the row: free it for a rerun
+                outcomes.append(TaskOutcome(task.goal_key, task.seed, "failed", message=text))
+        return outcomes
+
+    def cancel_all(self) -> list[Any]:
+        """Ask the tasks to stop (KeyboardInterrupt in the task: the planner checkpoints), wait for them."""
+        from twisted.experiments.runner import CANCEL_WAIT_S, POLL_S, TaskOutcome
+
+        for ref in self._pending:
+            self.ray.cancel(ref, force=False)
+        outcomes = []
+        deadline = time.monotonic() + CANCEL_WAIT_S
+        while self._pending and time.monotonic() < deadline:
+            ready, _ = self.ray.wait(list(self._pending), num_returns=1, timeout=POLL_S)
+            for ref in ready:
+                task = self._pending.pop(ref)
+                try:
+                    outcomes.append(self.ray.get(ref))
+                except Exception:  # noqa: BLE001 - cancelled before it started, or died: nothing stored
+                    outcomes.append(TaskOutcome(task.goal_key, task.seed, "interrupted"))
+        for ref in self._pending:
+            self.ray.cancel(ref, force=True)
+        self._pending.clear()
+        return outcomes
 
 
 def resolve_address(use_ray: bool, address: str | None) -> str | None:

@@ -468,9 +468,9 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
         state, final_p_data = result.state, result.p_data
     out = ReplayResult(run_id, info.goal, steps)
     if tighten and final_p_data is not None:
+        from twisted.store.knots import record_tightening
         from twisted.tighten import tighten as pull
         from twisted.tighten import tightening_sim
-        from twisted.store.knots import record_tightening
 
         out.tightened = pull(tightening_sim(friction_scale), state)
         goal = info.goal

@@ -1,0 +1,341 @@
+"""Problem sets (paper sections 5.2, 5.4): goals drawn from our data by frequency, or imported.
+
+The 3-crossing states our data visited are ranked by frequency, the number of kept transitions that
+reached the state (``transitions.to_state_id``, what "how often the random data visits it" means for a
+dataset of transitions), most frequent first, ties broken by key. The ranking is cut into thirds by
+rank (``numpy.array_split``: sizes differ by at most one, the first thirds take the extra): ``easy``
+(top), ``medium``, ``hard`` (bottom). ``unseen-3`` holds 3-crossing states the high level reaches from
+the empty rope (``moves.enumerate_states(3)``) that the data never visited. ``4`` holds 4-crossing
+states: those our data visited first (a rope has reached them, so they are physically feasible),
+topped up with states the high level reaches but the data never visited when fewer than ``per_set``
+were visited; each goal's tag says which. ``5`` holds 5-crossing states likewise: those our data
+visited, topped up with states one move beyond the goals of ``4``. From every pool ``per_set`` goals
+(10 in the paper) are drawn without replacement by one seeded generator, in the fixed order easy,
+medium, hard, unseen-3, 4, 5, so a seed reproduces every set.
+
+Imported sets come from a goal file (:func:`parse_goal_file`: P-data or knots) or a list of goals
+(:func:`save_goal_sets`), stored in one transaction or not at all.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from sqlalchemy import func, select
+
+from twisted.goals import Goal, state_goal
+from twisted.moves import parse_state, successors
+from twisted.store.experiments import (
+    ProblemRecord,
+    ProblemSet,
+    ProblemSetRecord,
+    count_results,
+    delete_problem_set,
+    load_problem_set,
+    save_problem_set,
+)
+from twisted.store.models import TopologicalState, Transition
+from twisted.topology import PData, PDataError, parse_p_data
+
+__all__ = [
+    "ALL_MADE_SETS",
+    "DIFFICULTY_SETS",
+    "FIVE_SET",
+    "FOUR_SET",
+    "UNSEEN_SET",
+    "EvalInputError",
+    "goal_problems",
+    "import_problem_sets",
+    "make_problem_sets",
+    "make_problem_sets_in_store",
+    "parse_goal_file",
+    "rank_by_frequency",
+    "save_goal_sets",
+    "split_thirds",
+    "state_frequencies",
+]
+
+DIFFICULTY_SETS = ("easy", "medium", "hard")
+UNSEEN_SET = "unseen-3"
+FOUR_SET = "4"
+FIVE_SET = "5"
+ALL_MADE_SETS = (*DIFFICULTY_SETS, UNSEEN_SET, FOUR_SET, FIVE_SET)
+
+
+class EvalInputError(ValueError):
+    """A set name, goal file, planner or option the experiments cannot take; the message says why."""
+
+
+def state_frequencies(session: Any) -> dict[str, tuple[PData, int]]:
+    """Every state our data reached: key -> (P-data, number of kept transitions reaching it)."""
+    reached = (
+        select(Transition.to_state_id.label("state_id"), func.count().label("n"))
+        .group_by(Transition.to_state_id)
+        .subquery()
+    )
+    rows = session.execute(
+        select(TopologicalState.p_data, reached.c.n).join(reached, reached.c.state_id == TopologicalState.id)
+    )
+    out = {}
+    for p_list, n in rows:
+        p = parse_p_data(p_list)
+        out[p.key] = (p, int(n))
+    return out
+
+
+def rank_by_frequency(frequencies: Mapping[str, int]) -> list[str]:
+    """Keys, most frequent first; equal frequencies in key order (deterministic)."""
+    return sorted(frequencies, key=lambda k: (-frequencies[k], k))
+
+
+def split_thirds(frequencies: Mapping[str, int]) -> tuple[list[str], list[str], list[str]]:
+    """Easy / medium / hard: the top, middle and bottom thirds of the ranking by frequency."""
+    ranked = rank_by_frequency(frequencies)
+    parts = np.array_split(np.arange(len(ranked)), 3)
+    easy, medium, hard = ([ranked[i] for i in part] for part in parts)
+    return easy, medium, hard
+
+
+def _constant(tag: str) -> Callable[[str], str]:
+    return lambda _key: tag
+
+
+def _sample(pool: Sequence[str], n: int, rng: np.random.Generator) -> list[str]:
+    if len(pool) <= n:
+        return list(pool)
+    picked = rng.choice(len(pool), size=n, replace=False)
+    return [pool[i] for i in picked]
+
+
+def make_problem_sets(
+    frequencies: Mapping[str, tuple[PData, int]],
+    reachable: Callable[[int], Sequence[PData]],
+    *,
+    per_set: int = 10,
+    seed: int = 0,
+    sets: Iterable[str] = ALL_MADE_SETS,
+) -> dict[str, list[ProblemRecord]]:
+    """Draw the goal sets from our data (pure: no store).
+
+    ``frequencies``: key -> (state, transitions reaching it) for the visited states;
+    ``reachable(c)``: the c-crossing states the high level reaches (c = 3, and 4 when needed).
+    Goals of a set are listed most frequent first.
+    """
+    if per_set < 1:
+        raise EvalInputError(f"--per-set must be at least 1, got {per_set}")
+    wanted = set(sets)
+    unknown = wanted - set(ALL_MADE_SETS)
+    if unknown:
+        raise EvalInputError(f"unknown set {sorted(unknown)[0]!r}: choose from {', '.join(ALL_MADE_SETS)}")
+    visited = {k: (p, n) for k, (p, n) in frequencies.items() if n > 0}
+    three = {k: n for k, (p, n) in visited.items() if p.cross == 3}
+    rng = np.random.default_rng(seed)
+    out: dict[str, list[ProblemRecord]] = {}
+
+    def records(
+        keys: Iterable[str], tag_of: Callable[[str], str], pool: Mapping[str, PData]
+    ) -> list[ProblemRecord]:
+        chosen = sorted(keys, key=lambda k: (-visited.get(k, (None, 0))[1], k))
+        return [
+            ProblemRecord(None, i, pool[k], visited.get(k, (None, 0))[1], tag_of(k))
+            for i, k in enumerate(chosen)
+        ]
+
+    # Always draw in the same order so that a seed gives the same sets whichever subset is asked for.
+    for name, third in zip(DIFFICULTY_SETS, split_thirds(three), strict=True):
+        picked = _sample(third, per_set, rng)
+        if name in wanted:
+            out[name] = records(picked, _constant(name), {k: visited[k][0] for k in picked})
+    all3 = {p.key: p for p in reachable(3)}
+    unseen = sorted(k for k in all3 if k not in visited)
+    picked = _sample(unseen, per_set, rng)
+    if UNSEEN_SET in wanted:
+        out[UNSEEN_SET] = records(picked, _constant("unseen"), all3)
+    if FOUR_SET in wanted or FIVE_SET in wanted:  # 5 is drawn after 4, so 4 is drawn for it too
+        four_visited = sorted(k for k, (p, _) in visited.items() if p.cross == 4)
+        picked = _sample(four_visited, per_set, rng)
+        pool = {k: visited[k][0] for k in picked}
+        if len(picked) < per_set:
+            all4 = {p.key: p for p in reachable(4)}
+            extra = _sample(sorted(k for k in all4 if k not in visited), per_set - len(picked), rng)
+            pool.update({k: all4[k] for k in extra})
+            picked += extra
+        four = records(picked, lambda k: "4-visited" if k in visited else "4-unseen", pool)
+        if FOUR_SET in wanted:
+            out[FOUR_SET] = four
+    if FIVE_SET in wanted:
+        # visited 5-crossing states first, topped up with states one move beyond the 4-crossing goals
+        # (enumerating all 130,304 five-crossing states takes half a minute)
+        five_visited = sorted(k for k, (p, _) in visited.items() if p.cross == 5)
+        picked = _sample(five_visited, per_set, rng)
+        pool = {k: visited[k][0] for k in picked}
+        if len(picked) < per_set:
+            beyond = {s.state.key: s.state for r in four for s in successors(r.p_data) if s.state.cross == 5}
+            extra = _sample(sorted(k for k in beyond if k not in visited), per_set - len(picked), rng)
+            pool.update({k: beyond[k] for k in extra})
+            picked += extra
+        out[FIVE_SET] = records(picked, lambda k: "5-visited" if k in visited else "5-unseen", pool)
+    return out
+
+
+def _enumerated(c: int) -> list[PData]:
+    from twisted.moves import enumerate_states
+
+    return enumerate_states(c)[c]
+
+
+def make_problem_sets_in_store(
+    store: Any,
+    *,
+    per_set: int = 10,
+    seed: int = 0,
+    prefix: str = "",
+    replace: bool = False,
+    sets: Iterable[str] = ALL_MADE_SETS,
+    reachable: Callable[[int], Sequence[PData]] = _enumerated,
+) -> list[ProblemSetRecord]:
+    """Make the sets from the store's data and save them (names ``prefix + easy`` etc.).
+
+    An existing set of the same name is an error unless ``replace`` (allowed only while no
+    evaluation result refers to it).
+    """
+    sets = [s for s in ALL_MADE_SETS if s in set(sets)]
+    with store.session() as session:
+        frequencies = state_frequencies(session)
+    three_visited = sum(1 for p, n in frequencies.values() if p.cross == 3 and n > 0)
+    if three_visited < 3 and any(s in DIFFICULTY_SETS for s in sets):
+        raise EvalInputError(
+            f"the data visited {three_visited} three-crossing states; easy/medium/hard need at least 3 "
+            "(collect data first: `twisted collect`)"
+        )
+    drawn = make_problem_sets(frequencies, reachable, per_set=per_set, seed=seed, sets=sets)
+    parameters = {
+        "per_set": per_set,
+        "frequency": "kept transitions reaching the state",
+        "three_crossing_states_visited": three_visited,
+        "transitions": sum(n for _, n in frequencies.values()),
+    }
+    with store.session(write=True) as session:
+        for name in drawn:
+            full = f"{prefix}{name}"
+            existing = session.scalar(select(ProblemSet).where(ProblemSet.name == full))
+            if existing is not None:
+                n_results = count_results(session, existing.id)
+                if not replace:
+                    raise EvalInputError(f"problem set {full!r} exists: use --replace or --prefix")
+                if n_results:
+                    raise EvalInputError(
+                        f"problem set {full!r} has {n_results} evaluation results; it cannot be replaced "
+                        "(use --prefix to make new sets)"
+                    )
+                delete_problem_set(session, existing.id)
+                session.flush()
+            save_problem_set(session, full, drawn[name], source="made", seed=seed, parameters=parameters)
+    with store.session() as session:
+        return [r for name in drawn if (r := load_problem_set(session, f"{prefix}{name}")) is not None]
+
+
+def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]:
+    """Goals from JSON: a list of goals (one set called ``name``) or an object of named lists.
+
+    A goal is P-data, or a knot (``"overhand"``, ``"figure-eight@4"``: any state of that many crossings,
+    default the knot's crossing number, that ties it). For an object the sets are called by their
+    keys, prefixed ``name-`` when a name is given. Every goal is checked; the first bad one raises
+    :class:`EvalInputError` naming set and index.
+    """
+    from twisted.goals import GoalError, goal_from_spec
+
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise EvalInputError(
+            f"goal file is not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
+        ) from None
+    except RecursionError:
+        message = "goal file nests lists or objects far too deeply (a goal is a list of lists)"
+        raise EvalInputError(message) from None
+    if isinstance(data, list):
+        if not name:
+            raise EvalInputError("a goal file holding one list needs a set name (--name)")
+        named = {name: data}
+    elif isinstance(data, dict):
+        named = {(f"{name}-{k}" if name else str(k)): v for k, v in data.items()}
+    else:
+        raise EvalInputError(
+            f"goal file must hold a JSON list of goals or an object of named lists, got {type(data).__name__}"
+        )
+    out: dict[str, list[Goal]] = {}
+    for set_name, goals in named.items():
+        if not set_name or len(set_name) > 64:
+            shown = set_name if len(set_name) <= 80 else f"{set_name[:80]}... ({len(set_name):,} characters)"
+            raise EvalInputError(f"set name {shown!r} must have 1 to 64 characters")
+        if not isinstance(goals, list) or not goals:
+            raise EvalInputError(f"set {set_name!r}: expected a non-empty list of goals (P-data or knots)")
+        seen: dict[str, int] = {}
+        parsed = []
+        for i, entry in enumerate(goals):
+            where = f"set {set_name!r} entry {i}"
+            # A list of entries that all are lists is a state; anything else is reported as malformed.
+            try:
+                if isinstance(entry, str):
+                    goal = goal_from_spec(entry)
+                else:
+                    goal = state_goal(parse_state(entry, where))
+            except GoalError as exc:
+                raise EvalInputError(f"{where}: {exc}") from None
+            except PDataError as exc:
+                raise EvalInputError(str(exc)) from None
+            if goal.cross == 0:
+                raise EvalInputError(f"{where}: the empty rope [] is not a goal")
+            if goal.spec in seen:
+                raise EvalInputError(f"{where}: same goal as entry {seen[goal.spec]} ({goal.spec})")
+            seen[goal.spec] = i
+            parsed.append(goal)
+        out[set_name] = parsed
+    return out
+
+
+def goal_problems(
+    goals: Sequence[Goal], frequencies: Mapping[str, tuple[PData, int]], tag: str
+) -> list[ProblemRecord]:
+    """Problem records for ``goals``; a goal's frequency counts the transitions reaching any of its states."""
+    return [
+        ProblemRecord(
+            None,
+            i,
+            goal.representative,
+            sum(frequencies.get(p.key, (p, 0))[1] for p in goal.states),
+            tag,
+            spec=goal.spec if goal.knot is not None else None,
+        )
+        for i, goal in enumerate(goals)
+    ]
+
+
+def import_problem_sets(store: Any, text: str, name: str | None = None) -> list[ProblemSetRecord]:
+    """Validate a goal file completely, then store all its sets in one transaction (or none)."""
+    goals = parse_goal_file(text, name)
+    return save_goal_sets(store, goals, "imported")
+
+
+def save_goal_sets(store: Any, goals: Mapping[str, Sequence[Goal]], tag: str) -> list[ProblemSetRecord]:
+    """Store new problem sets of the given goals (``source = 'imported'``) in one transaction, or none."""
+    with store.session() as session:
+        frequencies = state_frequencies(session)
+    with store.session(write=True) as session:
+        for set_name in goals:
+            if session.scalar(select(ProblemSet.id).where(ProblemSet.name == set_name)) is not None:
+                raise EvalInputError(f"problem set {set_name!r} exists already: import under another --name")
+        for set_name, set_goals in goals.items():
+            save_problem_set(
+                session,
+                set_name,
+                goal_problems(set_goals, frequencies, tag),
+                source="imported",
+                parameters={"goals": len(set_goals)},
+            )
+    with store.session() as session:
+        return [r for set_name in goals if (r := load_problem_set(session, set_name)) is not None]
