@@ -74,6 +74,9 @@ def problems_make(
     """Make easy/medium/hard (3-crossing states by visit frequency), unseen-3 and 4 from our data."""
     from twisted.evaluate import ALL_MADE_SETS, EvalInputError, make_problem_sets_in_store
 
+    unknown = [name for name in sets or () if name not in ALL_MADE_SETS]
+    if unknown:
+        fail(f"--set {unknown[0]}: no such set; choose from {', '.join(ALL_MADE_SETS)}")
     with open_db(ctx) as store:
         try:
             records = make_problem_sets_in_store(
@@ -435,7 +438,8 @@ def discretise_command(
     check_workers(workers or None)
     workers = workers or _default_parallel()
     columns = (TextColumn("[bold]re-simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with open_db(ctx) as store, Progress(*columns, console=console) as bar:
+    # the stored transitions are re-simulated: a new database has none
+    with open_db(ctx, create=False) as store, Progress(*columns, console=console) as bar:
         task_id = bar.add_task("discretise", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -539,7 +543,8 @@ def render_command(
     gif_path = None
     if run is not None and not tightened:
         gif_path = _output_file("--gif", gif or png.with_suffix(".gif"), ".gif")
-    with open_db(ctx) as store:
+    needs = f"--config {config}" if config is not None else None if run is None else f"--run {run}"
+    with open_db(ctx, needed_by=needs) as store:
         try:
             if config is not None:
                 rendered = render_configuration(store, config, png, gl=gl)

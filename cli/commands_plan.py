@@ -335,7 +335,7 @@ def _set_up(
         try:
             sampler, used_model_id = curve_sampler(store, options.planner, model_id)
         except PlanInputError as exc:
-            fail(str(exc))
+            fail(f"--model {request.model_id}: {exc}" if request.model_id is not None else str(exc))
     _print_model(sampler, used_model_id, request.as_json)
     step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
     pool = resources.enter_context(SimPool(request.workers))

@@ -93,7 +93,6 @@ def train_command(
             "--from",
             parser=parse_sources,
             metavar="SOURCES",
-            show_default=",".join(DEFAULT_SOURCES),
             help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
         ),
     ] = DEFAULT_SOURCES,
@@ -238,7 +237,7 @@ def models_command(
         problem = unwritable(Path(export))
         if problem is not None:
             fail(f"--export {export}: {problem}")
-    store = open_db(ctx)
+    store = open_db(ctx, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
         try:
             model = load_model(store, model_id)

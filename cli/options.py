@@ -72,7 +72,6 @@ def seeds_option() -> Any:
         "--seeds",
         parser=parse_seeds,
         metavar="SEEDS",
-        show_default="0",
         help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'.",
     )
 

@@ -52,7 +52,7 @@ __all__ = [
     "train",
 ]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 KEEP_CHECKPOINTS = 2
 EVAL_BATCH = 4096
@@ -376,7 +376,7 @@ def train(
         + ")"
     )
 
-    log.info(
+    logger.info(
         "training run %d %s on %s: %d training / %d validation samples; parameters %s",
         run_id,
         "resumed" if resume else "started",
@@ -438,7 +438,7 @@ def train(
                     {"epoch": epoch, "elapsed_s": round(elapsed(), 1), "train_batch_loss": mean_loss, **val}
                 )
                 epoch_loss[:] = [0.0, 0]
-                log.info(
+                logger.info(
                     "training run %d epoch %d/%d: train loss %.4f, val NLL %s, link accuracy %s (%.0f s)",
                     run_id,
                     epoch + 1,
@@ -467,13 +467,13 @@ def train(
     except KeyboardInterrupt:
         _save_checkpoint(store, run_id, trainer, elapsed(), history)
         _set_status(store, run_id, "interrupted", elapsed())
-        log.warning("training run %d interrupted at epoch %d: checkpoint saved", run_id, trainer.epoch)
+        logger.warning("training run %d interrupted at epoch %d: checkpoint saved", run_id, trainer.epoch)
         raise
 
     out_of_time = elapsed() >= budget_s
     if stopped and not out_of_time:
         _set_status(store, run_id, "interrupted", elapsed())
-        log.info("training run %d stopped at epoch %d: checkpoint saved (resumable)", run_id, trainer.epoch)
+        logger.info("training run %d stopped at epoch %d: checkpoint saved", run_id, trainer.epoch)
         return TrainOutcome(run_id, "interrupted", None, {"history": history}, len(train_data), len(val_data))
 
     if trainer.best_net is not None:
@@ -517,7 +517,7 @@ def train(
         row.status, row.ended_at, row.elapsed_s = "finished", utcnow(), elapsed()
         row.epochs_done = trainer.epoch
         row.metrics = {"history": history, "final": metrics}
-    log.info(
+    logger.info(
         "training run %d finished after %d epochs (%.0f s): model %d stored (best epoch %s, val NLL %s)",
         run_id,
         trainer.epoch,
