@@ -126,7 +126,7 @@ app = Commands(
 )
 console = Console()
 err_console = Console(stderr=True)
-log = logging.getLogger("cli")
+log = logging.getLogger(__name__)
 
 
 def subcommands(name: str, help: str) -> Commands:
@@ -218,7 +218,7 @@ def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
     hints = typing.get_type_hints(command, include_extras=True)
     # typer hands the context to one parameter: the command's own, if it has one
     own_ctx = next((name for name, hint in hints.items() if hint is typer.Context), None)
-    extra = {
+    extra: dict[str, tuple[Any, Any]] = {
         "global_db": (str | None, _db_option(None, show_default=False)),
         "global_log_file": (Annotated[Path | None, _log_file_option()], None),
         "global_verbose": (bool, _verbose_option()),
@@ -228,7 +228,11 @@ def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
 
     @functools.wraps(command)
     def run(*args: Any, **kwargs: Any) -> Any:
-        db, log_file, verbose = (kwargs.pop(name) for name in list(extra)[:3])
+        db, log_file, verbose = (
+            kwargs.pop("global_db"),
+            kwargs.pop("global_log_file"),
+            kwargs.pop("global_verbose"),
+        )
         ctx = kwargs[own_ctx] if own_ctx is not None else kwargs.pop("global_ctx")
         state = ctx.find_root().obj
         if not isinstance(state, AppState):

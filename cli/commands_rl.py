@@ -105,7 +105,8 @@ def train_command(
     )
     if goal_crossings is not None:
         config = dataclasses.replace(config, goal_crossings=tuple(goal_crossings))
-    if resume is None and problem_set is None:  # the goals, before the database is opened
+    given = goal or knot or goal_crossings is not None
+    if given and resume is None and problem_set is None:  # the goals given, before the database is opened
         try:
             goal_pool(
                 config.goals,

@@ -7,10 +7,8 @@ created, nor any other file) and on an existing database (its content must not c
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
-import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.test_hardening import _digest
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
 runner = CliRunner()
@@ -30,15 +29,6 @@ def _cli(*args: str, **kwargs: Any) -> tuple[int, str]:
         f"{args[:4]}... raised {result.exception!r}\n{result.output[-2000:]}"
     )
     return result.exit_code, " ".join(result.output.replace("│", " ").split())
-
-
-def _digest(path: Path) -> str:
-    """The database's content, table by table (the file's bytes may change by a WAL checkpoint)."""
-    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
-    try:
-        return hashlib.sha256("\n".join(conn.iterdump()).encode()).hexdigest()
-    finally:
-        conn.close()
 
 
 @pytest.fixture(scope="module")
