@@ -15,9 +15,9 @@ import time
 import numpy as np
 import torch
 
+from twisted.model.config import NetConfig, TrainConfig
 from twisted.model.data import TransitionData, load_transitions, transitions_from_samples
-from twisted.model.network import NetConfig
-from twisted.model.train import TrainConfig, Trainer
+from twisted.model.train import Trainer
 from twisted.sim import sample_curve
 from twisted.topology import PData, top
 

@@ -1,10 +1,20 @@
-"""The Typer application object and what every command shares (the --db option, errors, exit codes)."""
+"""The Typer application object and what every command shares: the global options (--db, --log-file,
+--verbose, --version), opening the database, errors and exit codes."""
 
 from __future__ import annotations
 
+import functools
+import inspect
+import logging
 import math
+import os
+import time
+import typing
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NoReturn
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -97,7 +107,21 @@ class _Commands(TyperGroup):
             raise typer.Exit(code) from None
 
 
-app = typer.Typer(
+class Commands(typer.Typer):
+    """A Typer app whose every command also takes the global options after its name
+    (``twisted plan --db URL``; :func:`_with_global_options`)."""
+
+    def command(self, *args: Any, **kwargs: Any) -> Any:
+        register = super().command(*args, **kwargs)
+
+        def decorator(function: Callable[..., Any]) -> Callable[..., Any]:
+            register(_with_global_options(function))
+            return function
+
+        return decorator
+
+
+app = Commands(
     cls=_Commands,
     no_args_is_help=True,
     add_completion=False,
@@ -105,21 +129,171 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
+log = logging.getLogger(__name__)
+
+
+def subcommands(name: str, help: str) -> Commands:
+    """A group of commands, ``twisted NAME ...``."""
+    group = Commands(no_args_is_help=True, help=help)
+    app.add_typer(group, name=name)
+    return group
 
 
 @dataclass
 class AppState:
+    """The global options: before the command (the root callback), then after it (they win)."""
+
     db_url: str = DEFAULT_DB
+    log_file: Path | None = None
+    verbose: bool = False
+
+
+# The global options, defined once: the root callback takes them before the command (``--db`` also
+# from TWISTED_DB), every command after its name (overriding the root's; ``--verbose`` adds).
+def _db_option(default: str | None, **extra: Any) -> Any:
+    return typer.Option(
+        default,
+        "--db",
+        metavar="URL",
+        help="Database URL (SQLite file or postgresql+psycopg://...); given after the command it wins "
+        "over one given before it.",
+        **extra,
+    )
+
+
+def _checked_log_file(value: Path | None) -> Path | None:
+    problem = None if value is None else unwritable(value, new_folders=False)
+    if problem is not None:
+        raise typer.BadParameter(problem)
+    return value
+
+
+def _log_file_option() -> Any:
+    return typer.Option(
+        "--log-file",
+        metavar="PATH",
+        callback=_checked_log_file,
+        help="Append the log (timestamped: start, parameters, progress, end) to this file.",
+        show_default=False,
+    )
+
+
+def _verbose_option() -> Any:
+    return typer.Option(False, "--verbose", help="Show the log on the console too, down to DEBUG.")
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"twisted {package_version()}")
+        raise typer.Exit(EXIT_OK)
+
+
+def package_version() -> str:
+    """The installed version of the distribution that holds the ``twisted`` package."""
+    from importlib import metadata
+
+    names = metadata.packages_distributions().get("twisted", [])
+    for name in names or ["twisted-knots"]:
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return "(not installed)"
 
 
 @app.callback()
 def main(
     ctx: typer.Context,
-    db: str = typer.Option(
-        DEFAULT_DB, "--db", envvar="TWISTED_DB", help="Database URL (SQLite file or postgresql+psycopg://...)."
+    db: str = _db_option(DEFAULT_DB, envvar="TWISTED_DB"),
+    log_file: Annotated[Path | None, _log_file_option()] = None,
+    verbose: bool = _verbose_option(),
+    version: bool = typer.Option(
+        False, "--version", is_eager=True, callback=_print_version, help="Print the version and exit."
     ),
 ) -> None:
-    ctx.obj = AppState(db_url=db)
+    ctx.obj = AppState(db_url=db, log_file=log_file, verbose=verbose)
+
+
+def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``command`` taking the global options too; it runs with the log configured, its start (with its
+    parameters) and its end logged."""
+    signature = inspect.signature(command, eval_str=True)
+    hints = typing.get_type_hints(command, include_extras=True)
+    # typer hands the context to one parameter: the command's own, if it has one
+    own_ctx = next((name for name, hint in hints.items() if hint is typer.Context), None)
+    extra: dict[str, tuple[Any, Any]] = {
+        "global_db": (str | None, _db_option(None, show_default=False)),
+        "global_log_file": (Annotated[Path | None, _log_file_option()], None),
+        "global_verbose": (bool, _verbose_option()),
+    }
+    if own_ctx is None:
+        extra["global_ctx"] = (typer.Context, inspect.Parameter.empty)
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        db, log_file, verbose = (
+            kwargs.pop("global_db"),
+            kwargs.pop("global_log_file"),
+            kwargs.pop("global_verbose"),
+        )
+        ctx = kwargs[own_ctx] if own_ctx is not None else kwargs.pop("global_ctx")
+        state = ctx.find_root().obj
+        if not isinstance(state, AppState):
+            state = ctx.find_root().obj = AppState()
+        state.db_url = db if db is not None else state.db_url
+        state.log_file = log_file if log_file is not None else state.log_file
+        state.verbose = state.verbose or verbose
+        given = {name: v for name, v in kwargs.items() if name != own_ctx}
+        return _logged(ctx, state, functools.partial(command, *args, **kwargs), given)
+
+    parameters = [
+        p.replace(annotation=hints.get(p.name, p.annotation)) for p in signature.parameters.values()
+    ]
+    parameters += [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, annotation=annotation, default=default)
+        for name, (annotation, default) in extra.items()
+    ]
+    run.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+    run.__annotations__ = {**hints, **{name: annotation for name, (annotation, _) in extra.items()}}
+    return run
+
+
+def _logged(ctx: typer.Context, state: AppState, command: Callable[[], Any], given: dict[str, Any]) -> Any:
+    """Run ``command`` with the log configured (:mod:`cli.logs`), its start (with the options ``given``)
+    and its end logged."""
+    from cli import logs
+
+    logs.configure(err_console, verbose=state.verbose, log_file=state.log_file)
+    shown = ", ".join(
+        f"{name}={shorten(repr(v.value if isinstance(v, Enum) else v))}" for name, v in given.items()
+    )
+    log.info("%s started (database %s): %s", ctx.command_path, _shown_url(state.db_url), shown)
+    started = time.monotonic()
+    code: int | str = EXIT_OK
+    try:
+        return command()
+    except typer.Exit as exc:
+        code = exc.exit_code
+        raise
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+        raise
+    except BaseException as exc:
+        code = type(exc).__name__
+        raise
+    finally:
+        log.info("%s ended: exit %s after %.1f s", ctx.command_path, code, time.monotonic() - started)
+        logs.close()
+
+
+def _shown_url(url: str) -> str:
+    """``url`` with its password hidden."""
+    from sqlalchemy.engine import make_url
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:  # malformed: open_db says so
+        return shorten(url)
 
 
 # Worker processes on this machine: each is a Python process with its own simulator (~100 MB); beyond a
@@ -148,8 +322,13 @@ def db_url(ctx: typer.Context) -> str:
     return state.db_url if isinstance(state, AppState) else DEFAULT_DB
 
 
-def open_db(ctx: typer.Context, create: bool = True, readonly: bool = False) -> Any:
+def open_db(
+    ctx: typer.Context, create: bool = True, readonly: bool = False, needed_by: str | None = None
+) -> Any:
     """The store at --db (created when new and ``create``); a refused database exits 2 with the reason.
+
+    ``needed_by``: the input that names something stored (e.g. ``--set easy``): a database that does not
+    exist yet is then refused, naming that input, instead of created.
 
     ``readonly``: a command that only reads (stats, db) also opens a file it may not write, without
     writing to it. An in-memory SQLite database is refused: nothing written to it would be kept, and
@@ -166,9 +345,28 @@ def open_db(ctx: typer.Context, create: bool = True, readonly: bool = False) -> 
                 f"--db {shorten(url)}: an in-memory SQLite database keeps nothing (and worker processes "
                 "cannot share it); give a file, e.g. sqlite:///twisted.db"
             )
-        return open_store(url, create=create, readonly=readonly)
+        return open_store(url, create=create and needed_by is None, readonly=readonly)
     except StoreError as exc:
-        fail(str(exc))
+        fail(f"{needed_by}: {exc}" if needed_by else str(exc))
+
+
+def unwritable(path: Path, new_folders: bool = True) -> str | None:
+    """Why a file cannot be written at ``path`` (None: it can be); nothing is created. ``new_folders``:
+    missing folders would be created (the nearest existing one must allow it)."""
+    if path.is_dir():
+        return "is a directory; give a file name"
+    folder = path.parent
+    if not new_folders and not folder.is_dir():
+        return f"the folder {folder} does not exist"
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        return f"{folder} is not a directory"
+    if not os.access(folder, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        return f"cannot write there (no permission in {folder})"
+    if str(path.resolve()).startswith(("/proc/", "/sys/", "/dev/")):
+        return "not a place for files (a kernel file system); give another path"
+    return None
 
 
 def shorten(text: str, limit: int = 120) -> str:

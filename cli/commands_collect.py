@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any
 
@@ -11,6 +10,7 @@ from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
 from cli.app import EXIT_BAD_INPUT, app, check_workers, console, fail, open_db, seed_option
+from cli.options import json_option, print_json
 from twisted.runtime import signal_exit_code
 
 EXIT_FAILED = 1
@@ -172,7 +172,7 @@ def collect_command(
 @app.command("stats")
 def stats_command(
     ctx: typer.Context,
-    as_json: bool = typer.Option(False, "--json", help="Print the figures as JSON."),
+    as_json: bool = json_option("the figures"),
 ) -> None:
     """Configurations, kept transitions and states per crossing count and per knot type; acceptance;
     throughput per run.
@@ -197,7 +197,7 @@ def stats_command(
                 for v in knot_visits(session)
             ]
     if as_json:
-        typer.echo(json.dumps(stats, default=str, indent=2))
+        print_json(stats)
         return
 
     table = Table(title="Per crossing count")
@@ -258,7 +258,9 @@ def stats_command(
 
 
 @app.command("db")
-def db_command(ctx: typer.Context) -> None:
+def db_command(
+    ctx: typer.Context, as_json: bool = json_option("where it is, its revisions and its rows")
+) -> None:
     """Show the database: where it is, its schema revisions, and the rows in each table (read-only)."""
     import importlib
     import pkgutil
@@ -279,7 +281,11 @@ def db_command(ctx: typer.Context) -> None:
             for name, table in sorted(Base.metadata.tables.items())
             if name in present
         }
-    console.print(f"database: {store.url.render_as_string(hide_password=True)} ({store.dialect})")
+    where = store.url.render_as_string(hide_password=True)
+    if as_json:
+        print_json({"database": where, "dialect": store.dialect, "revisions": revisions, "rows": counts})
+        return
+    console.print(f"database: {where} ({store.dialect})")
     console.print(
         f"schema revisions: {', '.join(revisions)} (this twisted: {', '.join(sorted(head_revisions()))})"
     )

@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -13,7 +11,6 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from cli.app import (
-    MAX_SEED,
     app,
     check_workers,
     console,
@@ -22,22 +19,26 @@ from cli.app import (
     fail,
     open_db,
     seed_option,
-    shorten,
+    subcommands,
+    unwritable,
+)
+from cli.options import (
+    DEFAULT_PLANNER,
+    DEFAULT_SEEDS,
+    Heuristic,
+    Planner,
+    Seeds,
+    json_option,
+    print_json,
+    seeds_option,
+    value,
 )
 
 if TYPE_CHECKING:
     from twisted.experiments import EvalOptions
 
-MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
-
-problems_app = typer.Typer(
-    no_args_is_help=True, help="Goal sets for evaluations (made from our data or imported)."
-)
-sensitivity_app = typer.Typer(
-    no_args_is_help=True, help="Friction sensitivity: evaluate at 95/100/105 % and plot."
-)
-app.add_typer(problems_app, name="problems")
-app.add_typer(sensitivity_app, name="sensitivity")
+problems_app = subcommands("problems", "Goal sets for evaluations (made from our data or imported).")
+sensitivity_app = subcommands("sensitivity", "Friction sensitivity: evaluate at 95/100/105 % and plot.")
 
 
 def _print_sets(records: list[Any]) -> None:
@@ -76,6 +77,9 @@ def problems_make(
     from twisted.experiments import EvalInputError, make_problem_sets_in_store
     from twisted.experiments.problems import ALL_MADE_SETS
 
+    unknown = [name for name in sets or () if name not in ALL_MADE_SETS]
+    if unknown:
+        fail(f"--set {unknown[0]}: no such set; choose from {', '.join(ALL_MADE_SETS)}")
     with open_db(ctx) as store:
         try:
             records = make_problem_sets_in_store(
@@ -142,7 +146,7 @@ def problems_knots(
 def problems_list(
     ctx: typer.Context,
     show: str = typer.Option(None, "--show", help="Also print the goals of this set."),
-    as_json: bool = typer.Option(False, "--json", help="Print the goals of --show as JSON (importable)."),
+    as_json: bool = json_option("the sets (with --show: that set's goals, importable)"),
 ) -> None:
     """The stored problem sets (and the goals of one with --show)."""
     from twisted.store.experiments import list_problem_sets, load_problem_set
@@ -153,8 +157,10 @@ def problems_list(
     if show and record is None:
         fail(f"no problem set {show!r}: see `twisted problems list`")
     if record is not None and as_json:
-        goals_json = [p.p_data.to_list() if p.spec is None else p.spec for p in record.problems]
-        console.print_json(json.dumps(goals_json))
+        print_json([p.p_data.to_list() if p.spec is None else p.spec for p in record.problems])
+        return
+    if as_json:
+        print_json(sets)
         return
     table = Table("id", "set", "source", "seed", "goals", "cross", "frequency", "results")
     for s in sets:
@@ -189,7 +195,8 @@ def _eval(
         TextColumn("solved {task.fields[solved]}"),
         TimeElapsedColumn(),
     )
-    with open_db(ctx) as store, Progress(*columns, console=console) as bar:
+    needed_by = f"--set {request.set_name}"
+    with open_db(ctx, needed_by=needed_by) as store, Progress(*columns, console=console) as bar:
         task_id = None
 
         def on_start(summary: Any, pending: int) -> None:
@@ -233,34 +240,10 @@ def _eval(
     return summary
 
 
-def _parse_seeds(text: str) -> list[int]:
-    """'0 1 2', '0,1,2', '0-4' or a mix -> sorted distinct seeds (exit 2 on anything else)."""
-    seeds: set[int] = set()
-    for part in text.replace(",", " ").split():
-        try:
-            if "-" in part[1:]:
-                lo, hi = part.split("-", 1)
-                first, last = int(lo), int(hi)
-                if last < first:
-                    raise ValueError
-            else:
-                first = last = int(part)
-        except ValueError:
-            fail(f"--seeds: {shorten(part)!r} is not a seed or a range like 0-4 (give e.g. '0 1 2' or '0-4')")
-        if first < 0 or last > MAX_SEED:
-            fail(f"--seeds: {shorten(part)!r}: seeds are 0 to 2**63-1")
-        if last - first + 1 + len(seeds) > MAX_SEEDS:
-            fail(f"--seeds: at most {MAX_SEEDS:,} seeds per goal")
-        seeds.update(range(first, last + 1))
-    if not seeds:
-        fail("--seeds: give at least one seed")
-    return sorted(seeds)
-
-
-def _planner_options(heuristic: str | None, model_id: int | None) -> dict[str, Any]:
+def _planner_options(heuristic: Heuristic | None, model_id: int | None) -> dict[str, Any]:
     options: dict[str, Any] = {}
     if heuristic is not None:
-        options["heuristic"] = heuristic
+        options["heuristic"] = value(heuristic)
     if model_id is not None:
         options["model_id"] = model_id
     return options
@@ -276,21 +259,24 @@ def _default_parallel() -> int:
 def eval_command(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set (see `twisted problems list`)."),
-    planner: str = typer.Option(
-        "twisted", "--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."
-    ),
+    planner: Annotated[
+        Planner,
+        typer.Option("--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."),
+    ] = DEFAULT_PLANNER,
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time per goal in seconds (paper: 1800)."
     ),
     workers: int = typer.Option(
         1, "--workers", min=1, help="Simulator processes per planner (1 = in-process)."
     ),
-    seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
+    seeds: Annotated[Seeds, seeds_option()] = DEFAULT_SEEDS,
     friction_scale: float = typer.Option(
         1.0, "--friction-scale", min=0.01, max=100.0, help="Rope friction factor (0.95/1.05)."
     ),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
-    heuristic: str = typer.Option(None, "--heuristic", help="rnd, crs or ucb (planner default: crs)."),
+    heuristic: Annotated[
+        Heuristic | None, typer.Option("--heuristic", help="rnd, crs or ucb (planner default: crs).")
+    ] = None,
     model_id: int = typer.Option(
         None, "--model", help="Inverse model id (twisted) or policy checkpoint id (sac); default: the newest."
     ),
@@ -323,7 +309,7 @@ def eval_command(
     parallel = parallel or (0 if use_ray else _default_parallel())
     options = _planner_options(heuristic, model_id)
     request = EvalOptions(
-        set_name, planner, timeout_s, _parse_seeds(seeds), friction_scale, workers, parallel, options, label
+        set_name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label
     )
     _eval(ctx, request, use_ray, ray_address)
 
@@ -352,15 +338,15 @@ def report_command(
 def sensitivity_run(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set."),
-    planner: str = typer.Option("twisted", "--planner"),
+    planner: Annotated[Planner, typer.Option("--planner")] = DEFAULT_PLANNER,
     timeout_s: float = typer.Option(1800.0, "--timeout", min=0.0, help="Search time per goal in seconds."),
     scales: Annotated[
         list[float] | None, typer.Option("--scales", help="Friction factors (default 0.95 1.0 1.05); repeat.")
     ] = None,
-    seeds: str = typer.Option("0", "--seeds", help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'."),
+    seeds: Annotated[Seeds, seeds_option()] = DEFAULT_SEEDS,
     workers: int = typer.Option(1, "--workers", min=1),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
-    heuristic: str = typer.Option(None, "--heuristic"),
+    heuristic: Annotated[Heuristic | None, typer.Option("--heuristic")] = None,
     model_id: int = typer.Option(None, "--model"),
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
 ) -> None:
@@ -375,9 +361,11 @@ def sensitivity_run(
     check_workers(workers)
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
-    picked, options = _parse_seeds(seeds), _planner_options(heuristic, model_id)
+    options = _planner_options(heuristic, model_id)
     for scale in chosen:
-        request = EvalOptions(set_name, planner, timeout_s, picked, scale, workers, parallel, options, label)
+        request = EvalOptions(
+            set_name, value(planner), timeout_s, list(seeds), scale, workers, parallel, options, label
+        )
         _eval(ctx, request)
 
 
@@ -424,7 +412,8 @@ def discretise_command(
     check_workers(workers or None)
     workers = workers or _default_parallel()
     columns = (TextColumn("[bold]re-simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with open_db(ctx) as store, Progress(*columns, console=console) as bar:
+    # the stored transitions are re-simulated: a new database has none
+    with open_db(ctx, create=False) as store, Progress(*columns, console=console) as bar:
         task_id = bar.add_task("discretise", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -468,17 +457,9 @@ def _output_file(option: str, path: Path, suffix: str) -> Path:
         if path.suffix:
             fail(f"{option} {path}: the file must end in {suffix} (it is written as {suffix[1:].upper()})")
         path = path.with_name(path.name + suffix)
-    if path.is_dir():
-        fail(f"{option} {path}: is a directory; give a file name ending in {suffix}")
-    folder = path.parent
-    while not folder.exists():  # save_png creates missing folders: the nearest existing one must allow it
-        folder = folder.parent
-    if not folder.is_dir():
-        fail(f"{option} {path}: {folder} is not a directory")
-    if not os.access(folder, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        fail(f"{option} {path}: cannot write there (no permission in {folder})")
-    if str(path.resolve()).startswith(("/proc/", "/sys/", "/dev/")):
-        fail(f"{option} {path}: not a place for pictures (a kernel file system); give another path")
+    problem = unwritable(path)
+    if problem is not None:
+        fail(f"{option} {path}: {problem}")
     return path
 
 
@@ -536,7 +517,8 @@ def render_command(
     gif_path = None
     if run is not None and not tightened:
         gif_path = _output_file("--gif", gif or png.with_suffix(".gif"), ".gif")
-    with open_db(ctx) as store:
+    needs = f"--config {config}" if config is not None else None if run is None else f"--run {run}"
+    with open_db(ctx, needed_by=needs) as store:
         try:
             if config is not None:
                 rendered = render_configuration(store, config, png, gl=gl)

@@ -8,14 +8,14 @@ from typing import Any
 import typer
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, db_url, err_console, fail
+from cli.app import EXIT_BAD_INPUT, console, db_url, err_console, fail, subcommands
+from cli.options import json_option, print_json
 
-knots_app = typer.Typer(
-    no_args_is_help=True,
-    help="Knots by name: which knot a rope state really ties (both closures, under and over the table, "
+knots_app = subcommands(
+    "knots",
+    "Knots by name: which knot a rope state really ties (both closures, under and over the table, "
     "agree; otherwise it is a knotoid).",
 )
-app.add_typer(knots_app, name="knots")
 
 # The names shown by `knots list`, one per catalogue entry (resolve_knot accepts more spellings).
 LIST_NAMES = (
@@ -63,7 +63,7 @@ def list_command(
         "at 6 from their summands without enumerating.",
     ),
     limit: int = typer.Option(10, "--limit", help="States shown per knot, most visited first (0: all)."),
-    as_json: bool = typer.Option(False, "--json", help="Print everything (all states) as JSON."),
+    as_json: bool = json_option("everything (all states)"),
 ) -> None:
     """For each named knot: its invariants, and the P-data states that really tie it (both closures are the
     knot) at its crossing number, with how often the data in --db visited each (configurations reached
@@ -118,7 +118,7 @@ def list_command(
             }
         )
     if as_json:
-        typer.echo(json.dumps(entries, indent=2))
+        print_json(entries)
         return
 
     summary = Table(
@@ -160,7 +160,7 @@ def list_command(
 @knots_app.command("identify")
 def identify_command(
     p_data: str = typer.Argument(..., help='A P-data state, e.g. \'[[1,"O",4,"+"],[2,"U",5,"+"],...]\'.'),
-    as_json: bool = typer.Option(False, "--json", help="Print both closures and the knot as JSON."),
+    as_json: bool = json_option("both closures and the knot"),
 ) -> None:
     """Which knot a rope state ties: both closures (ends joined under / over the table); a knot only when
     they agree, otherwise a knotoid (pulling the ends decides)."""
@@ -172,7 +172,7 @@ def identify_command(
     except PDataError as exc:
         fail(f"P_DATA: {exc}", EXIT_BAD_INPUT)
     if as_json:
-        typer.echo(json.dumps(k.to_dict()))
+        print_json(k.to_dict(), indent=None)
         return
     console.print(k.describe(), highlight=False)
     for label, c in (("under", k.under), ("over", k.over)):

@@ -10,16 +10,15 @@ from typing import TYPE_CHECKING, NoReturn
 
 import typer
 
-from cli.app import EXIT_BAD_INPUT, EXIT_NOT_REACHED, app, db_url, err_console, fail
+from cli.app import EXIT_BAD_INPUT, EXIT_NOT_REACHED, db_url, err_console, fail, subcommands
 
 if TYPE_CHECKING:
     from twisted.topology import PData
 
-moves_app = typer.Typer(
-    no_args_is_help=True,
-    help="High-level moves (R1, R2, Cross) on P-data: successors, enumeration, BFS plans.",
+moves_app = subcommands(
+    "moves",
+    "High-level moves (R1, R2, Cross) on P-data: successors, enumeration, BFS plans.",
 )
-app.add_typer(moves_app, name="moves")
 
 MAX_ENUMERATE_CROSSES = 5  # 4 takes about a second; 5 about half a minute and ~150k states
 

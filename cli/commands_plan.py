@@ -14,7 +14,7 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -31,6 +31,7 @@ from cli.app import (
     open_db,
     seed_option,
 )
+from cli.options import Heuristic, Planner, json_option, print_json, value
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
@@ -58,12 +59,16 @@ def plan_command(
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time limit in seconds (a resumed run's time counts)."
     ),
-    heuristic: str | None = typer.Option(None, "--heuristic", help="rnd | crs (default) | ucb."),
-    planner: str | None = typer.Option(
-        None,
-        "--planner",
-        help="twisted (default, inverse model) | sac (SAC+HER policy) | random-low | low-level-only.",
-    ),
+    heuristic: Annotated[
+        Heuristic | None, typer.Option("--heuristic", help="rnd | crs (default) | ucb.")
+    ] = None,
+    planner: Annotated[
+        Planner | None,
+        typer.Option(
+            "--planner",
+            help="twisted (default, inverse model) | sac (SAC+HER policy) | random-low | low-level-only.",
+        ),
+    ] = None,
     workers: int = typer.Option(
         2, "--workers", help="Simulator processes (1: in this process; at most 4 per CPU core)."
     ),
@@ -110,23 +115,13 @@ def plan_command(
         "little, pulled apart) ties the goal's knot; a reached state that fails the pull test does not "
         "end the search. Each pull test is stored with the run.",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    as_json: bool = json_option("the result"),
 ) -> None:
     """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database.
 
     The set-up (enumerating a knot's states, loading the model, starting the workers) counts toward
     --timeout and stops at Ctrl-C like the search does.
     """
-    from twisted.runtime import StopRequested, StopSignals
-
-    check_workers(workers)
-    if resume_run_id is not None and not resume:
-        fail(f"a run id is only taken with --resume: `twisted plan --resume {resume_run_id}`")
-    if goal is None and knot is None and crossings is None and not resume:
-        fail(
-            "a goal is required: --goal P-DATA (e.g. '[[1,\"O\",2,\"+\"],[2,\"U\",1,\"+\"]]') or --knot "
-            "NAME (e.g. overhand); or continue a stopped run with --resume [RUN_ID]"
-        )
     request = _Request(
         goal=goal,
         knot=knot,
@@ -138,8 +133,8 @@ def plan_command(
         workers=workers,
         as_json=as_json,
         search_options={
-            "planner": planner,
-            "heuristic": heuristic,
+            "planner": value(planner),
+            "heuristic": value(heuristic),
             "seed": seed,
             "k": k,
             "p_expand": p_expand,
@@ -148,11 +143,59 @@ def plan_command(
             "tighten": True if tighten else None,
         },
     )
+    _check(request)
+    search, result, setup_s, exit_code = _search(ctx, request, timeout_s, max_iterations, checkpoint_every_s)
+    _print_result(search, result, as_json, setup_s)
+    if result.solved:
+        raise typer.Exit(EXIT_OK)
+    if result.status == "interrupted":
+        err_console.print(
+            f"interrupted: checkpoint saved; continue with `twisted plan --resume {result.run_id}`",
+            highlight=False,
+        )
+        raise typer.Exit(exit_code)
+    raise typer.Exit(EXIT_NOT_REACHED)
+
+
+def _check(request: _Request) -> None:
+    """Exit 2 on a bad input that needs nothing stored to be seen as such (before anything is opened;
+    the goal is checked by the set-up, which can take long for a knot, see :func:`_set_up`)."""
+    check_workers(request.workers)
+    if request.run_id is not None and not request.resume:
+        fail(f"a run id is only taken with --resume: `twisted plan --resume {request.run_id}`")
+    if request.goal is None and request.knot is None and request.crossings is None and not request.resume:
+        fail(
+            'a goal is required: --goal P-DATA (e.g. \'[[1,"O",2,"+"],[2,"U",1,"+"]]\') or --knot '
+            "NAME (e.g. overhand); or continue a stopped run with --resume [RUN_ID]"
+        )
+    if request.resume and request.start_config is not None:
+        fail("--start-config cannot change the start of a resumed run")
+    if not request.resume:
+        from twisted.planner import PlanInputError, planner_options
+
+        try:
+            planner_options(request.search_options)
+        except PlanInputError as exc:
+            fail(str(exc))
+
+
+def _search(
+    ctx: typer.Context,
+    request: _Request,
+    timeout_s: float,
+    max_iterations: int | None,
+    checkpoint_every_s: float,
+) -> tuple[Any, Any, float, int]:
+    """Set up (the goal, the store, the model, the workers) and search, with a progress bar; the search,
+    its result, the set-up's seconds and the exit code of a stop. The set-up counts toward --timeout
+    and stops at Ctrl-C / SIGTERM; stopped there, the command exits (3 out of time, 130 / 143)."""
+    from twisted.runtime import StopRequested, StopSignals
+
     started = time.perf_counter()
     stop = StopSignals()
     with stop.installed(), contextlib.ExitStack() as resources:
         bar = resources.enter_context(
-            Progress(*_COLUMNS, console=err_console, transient=True, disable=as_json)
+            Progress(*_COLUMNS, console=err_console, transient=True, disable=request.as_json)
         )
         task = bar.add_task(
             "set-up", total=max(timeout_s, 1e-9), iteration=0, sims=0, nodes=1, states=1, max_cross=0
@@ -170,7 +213,7 @@ def plan_command(
         except StopRequested:
             bar.stop()
             spent = time.perf_counter() - started
-            unchanged = f": run {resume_run_id} is unchanged" if resume_run_id is not None else ""
+            unchanged = f": run {request.run_id} is unchanged" if request.run_id is not None else ""
             if stop.signum is None and stop.timed_out:
                 fail(
                     f"--timeout {timeout_s:g} s ran out during the set-up ({phase[0]}, after {spent:.1f} s); "
@@ -202,17 +245,7 @@ def plan_command(
         search.progress = progress
         bar.update(task, description=f"run {search.run_id}")
         result = search.run(timeout_s=timeout_s, max_iterations=max_iterations)
-
-    _print_result(search, result, as_json, setup_s)
-    if result.solved:
-        raise typer.Exit(EXIT_OK)
-    if result.status == "interrupted":
-        err_console.print(
-            f"interrupted: checkpoint saved; continue with `twisted plan --resume {result.run_id}`",
-            highlight=False,
-        )
-        raise typer.Exit(stop.exit_code)
-    raise typer.Exit(EXIT_NOT_REACHED)
+    return search, result, setup_s, stop.exit_code
 
 
 _COLUMNS = (
@@ -268,7 +301,7 @@ def _set_up(
     checks in between (database, run, model) finish first, so that a bad input is reported as such.
     """
     from twisted.goals import make_goal
-    from twisted.planner import PlanInputError, curve_sampler, planner_options
+    from twisted.planner import PlanInputError, curve_sampler
     from twisted.sim.pool import SimPool
 
     goal_p = None
@@ -278,24 +311,31 @@ def _set_up(
             goal_p = make_goal(request.goal, request.knot, request.crossings)
         except PlanInputError as exc:
             fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
-    if not request.resume:
-        try:
-            planner_options(request.search_options)  # exit 2 here, before the store is opened
-        except PlanInputError as exc:
-            fail(str(exc))
     step("opening the database")
     with stop.deferred():
-        store = resources.enter_context(open_db(ctx))
+        store = resources.enter_context(open_db(ctx, needed_by=_needs_stored(request)))
         run_id, options, model_id = _run_to_continue(store, request, goal_p)
         step("loading the model")
         try:
             sampler, used_model_id = curve_sampler(store, options.planner, model_id)
         except PlanInputError as exc:
-            fail(str(exc))
+            fail(f"--model {request.model_id}: {exc}" if request.model_id is not None else str(exc))
     _print_model(sampler, used_model_id, request.as_json)
     step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
     pool = resources.enter_context(SimPool(request.workers))
     return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool)
+
+
+def _needs_stored(request: _Request) -> str | None:
+    """The option that names something stored (a run, a model, a configuration), if any: a database
+    that does not exist yet is then refused instead of created."""
+    if request.resume:
+        return "--resume" + ("" if request.run_id is None else f" {request.run_id}")
+    if request.model_id is not None:
+        return f"--model {request.model_id}"
+    if request.start_config is not None:
+        return f"--start-config {request.start_config}"
+    return None
 
 
 def _print_model(sampler: Any, used_model_id: int | None, as_json: bool) -> None:
@@ -378,7 +418,7 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
             "tighten": search.options.tighten,
             "pull_tests": search.pull_tests,
         }
-        typer.echo(json.dumps(payload))
+        print_json(payload, indent=None)
         return
     outcome = "[bold green]solved[/]" if result.solved else f"[bold red]not solved ({result.status})[/]"
     console.print(
@@ -432,44 +472,43 @@ def replay_command(
         help="Then hold both ends, lift them a little and pull them apart until the rope is taut; exit 0 "
         "only if the tightened rope ties the goal's knot (stored with the run).",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    as_json: bool = json_option("the result"),
 ) -> None:
     """Re-simulate a run's plan from its initial configuration; exit 0 if it still ends in the goal."""
     from twisted.planner import PlanInputError, replay
 
-    store = open_db(ctx)
+    store = open_db(ctx, needed_by=f"RUN_ID {run_id}")
     try:
         result = replay(store, run_id, tighten=tighten)
     except PlanInputError as exc:
         fail(str(exc))
     ok = result.ties_goal if tighten else result.reached_goal
     if as_json:
-        typer.echo(
-            json.dumps(
-                {
-                    "run_id": run_id,
-                    "goal": result.goal.spec,
-                    "reached_goal": result.reached_goal,
-                    "steps": [
-                        {
-                            **_curve_row(step.curve),
-                            "recorded": step.recorded.to_list(),
-                            "replayed": None if step.replayed is None else step.replayed.to_list(),
-                            "reason": step.reason,
-                        }
-                        for step in result.steps
-                    ],
-                    **(
-                        {
-                            "goal_knot_types": sorted(result.goal.knot_types),
-                            "tightened": _tightened_dict(result.tightened),
-                            "ties_goal": result.ties_goal,
-                        }
-                        if tighten
-                        else {}
-                    ),
-                }
-            )
+        print_json(
+            {
+                "run_id": run_id,
+                "goal": result.goal.spec,
+                "reached_goal": result.reached_goal,
+                "steps": [
+                    {
+                        **_curve_row(step.curve),
+                        "recorded": step.recorded.to_list(),
+                        "replayed": None if step.replayed is None else step.replayed.to_list(),
+                        "reason": step.reason,
+                    }
+                    for step in result.steps
+                ],
+                **(
+                    {
+                        "goal_knot_types": sorted(result.goal.knot_types),
+                        "tightened": _tightened_dict(result.tightened),
+                        "ties_goal": result.ties_goal,
+                    }
+                    if tighten
+                    else {}
+                ),
+            },
+            indent=None,
         )
     else:
         table = Table(title=f"replay of run {run_id}")

@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option
+from cli.app import EXIT_BAD_INPUT, console, fail, open_db, seed_option, subcommands
+from cli.options import CrossingCounts, json_option, parse_crossing_counts, print_json
 
-rl_app = typer.Typer(
-    no_args_is_help=True,
-    help="SAC+HER baseline on the rope env (needs the rl extra: pip install 'twisted-knots\\[rl]').",
+rl_app = subcommands(
+    "rl",
+    "SAC+HER baseline on the rope env (needs the rl extra: pip install 'twisted-knots\\[rl]').",
 )
-app.add_typer(rl_app, name="rl")
 
 
 def _rate(counts: dict[int, tuple[int, int]]) -> str:
@@ -22,16 +23,6 @@ def _rate(counts: dict[int, tuple[int, int]]) -> str:
         f"{cross}x {hits}/{episodes}" + (f" ({100.0 * hits / episodes:.0f}%)" if episodes else "")
         for cross, (episodes, hits) in sorted(counts.items())
     )
-
-
-def _goal_crossings(text: str) -> tuple[int, ...]:
-    try:
-        counts = tuple(sorted({int(part) for part in text.split(",") if part.strip()}))
-    except ValueError:
-        fail(f"--goal-crossings must be comma-separated integers like 1,2,3, got {text!r}")
-    if not counts:
-        fail("--goal-crossings is empty: give counts like 1,2,3")
-    return counts
 
 
 @rl_app.command("train")
@@ -50,7 +41,16 @@ def train_command(
     knot_crossings: int | None = typer.Option(
         None, "--knot-crossings", min=1, help="Crossings of --knot states."
     ),
-    goal_crossings: str = typer.Option("1,2,3", "--goal-crossings", help="Crossing counts of default goals."),
+    goal_crossings: Annotated[
+        CrossingCounts | None,
+        typer.Option(
+            "--goal-crossings",
+            parser=parse_crossing_counts,
+            metavar="COUNTS",
+            show_default="1,2,3",  # SacConfig's (twisted.rl is imported when the command runs: torch)
+            help="Crossing counts of default goals.",
+        ),
+    ] = None,
     max_curves: int = typer.Option(
         10, "--max-curves", min=1, max=10_000, help="Curves per episode (truncation)."
     ),
@@ -85,7 +85,7 @@ def train_command(
         require_rl()
     except ImportError as exc:
         fail(str(exc))
-    from twisted.envs import GoalError
+    from twisted.envs import GoalError, goal_pool
 
     torch.set_num_threads(threads)
     config = SacConfig(
@@ -95,7 +95,6 @@ def train_command(
         problem_set=problem_set,
         knot=knot,
         knot_crossings=knot_crossings,
-        goal_crossings=_goal_crossings(goal_crossings),
         max_curves=max_curves,
         friction_scale=friction_scale,
         learning_starts=learning_starts,
@@ -104,7 +103,21 @@ def train_command(
         checkpoint_every=checkpoint_every,
         keep_replay_buffer=replay_buffer,
     )
-    store = open_db(ctx)
+    if goal_crossings is not None:
+        config = dataclasses.replace(config, goal_crossings=tuple(goal_crossings))
+    given = goal or knot or goal_crossings is not None
+    if given and resume is None and problem_set is None:  # the goals given, before the database is opened
+        try:
+            goal_pool(
+                config.goals,
+                knot=knot,
+                knot_crossings=knot_crossings,
+                goal_crossings=config.goal_crossings,
+            )
+        except GoalError as exc:
+            fail(str(exc))
+    needs = f"--resume {resume}" if resume is not None else problem_set and f"--problem-set {problem_set}"
+    store = open_db(ctx, needed_by=needs or None)
     columns = (
         TextColumn("[bold]run {task.fields[run]}"),
         BarColumn(),
@@ -145,7 +158,7 @@ def train_command(
 
 
 @rl_app.command("list")
-def list_command(ctx: typer.Context) -> None:
+def list_command(ctx: typer.Context, as_json: bool = json_option("the runs and their policies")) -> None:
     """SAC runs with their success per goal crossing count, and their stored policies."""
     from sqlalchemy import select
 
@@ -155,6 +168,25 @@ def list_command(ctx: typer.Context) -> None:
     with store.session() as session:
         runs = session.scalars(select(RlRun).order_by(RlRun.id)).all()
         checkpoints = list_checkpoints(session)
+    if as_json:
+        print_json(
+            [
+                {
+                    "run_id": run.id,
+                    "status": run.status,
+                    "steps_done": run.steps_done,
+                    "total_steps": run.total_steps,
+                    "episodes": run.episodes,
+                    "elapsed_s": run.elapsed_s,
+                    "success_by_goal_cross": (run.metrics or {}).get("success_by_goal_cross", {}),
+                    "policies": [
+                        {"id": c.id, "final": c.final} for c in checkpoints if c.rl_run_id == run.id
+                    ],
+                }
+                for run in runs
+            ]
+        )
+        return
     if not runs:
         console.print("no SAC runs in this database: train one with `twisted rl train`")
         return

@@ -3,14 +3,27 @@
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option, unwritable
+from cli.options import (
+    DEFAULT_LINK_HEAD,
+    DEFAULT_SOURCES,
+    LinkHead,
+    Sources,
+    json_option,
+    parse_device,
+    parse_sources,
+    print_json,
+    value,
+)
+from twisted.model.config import DEVICES, SOURCES, NetConfig, TrainConfig
 
 EXIT_FAILED = 1
 
@@ -22,8 +35,6 @@ def _fmt(value: Any, spec: str = ".3f") -> str:
 def _by_source(metrics: dict[str, Any], sides: str = "train,val") -> str:
     """``collect 3,126 / 324, search 812 / 90`` (training / validation samples per source); models from
     before sources were counted saw collected transitions only."""
-    from twisted.model.data import SOURCES
-
     wanted = sides.split(",")
     parts = []
     for source in SOURCES:
@@ -38,37 +49,57 @@ def _by_source(metrics: dict[str, Any], sides: str = "train,val") -> str:
 @app.command("train")
 def train_command(
     ctx: typer.Context,
-    epochs: int = typer.Option(40, "--epochs", min=1, help="Epochs over the training transitions."),
+    epochs: int = typer.Option(
+        TrainConfig.epochs, "--epochs", min=1, help="Epochs over the training transitions."
+    ),
     hours: float | None = typer.Option(
         None, "--hours", min=0.0, help="Stop (and store the model) after this time."
     ),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: Annotated[
+        str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="cpu or cuda.")
+    ] = DEVICES[0],
     resume: bool = typer.Option(False, "--resume", help="Continue the newest unfinished training run."),
-    seed: int = seed_option(0, "Seed of the split, batch order, augmentation and weights."),
-    batch_size: int = typer.Option(256, "--batch-size", min=1, max=1_000_000),
-    lr: float = typer.Option(1e-3, "--lr", min=0.0, help="Adam learning rate."),
-    weight_decay: float = typer.Option(0.0, "--weight-decay", min=0.0, help="AdamW weight decay (0: Adam)."),
-    hidden: int = typer.Option(256, "--hidden", min=8, max=8192, help="Width of the shared trunk."),
-    layers: int = typer.Option(3, "--layers", min=1, max=64, help="Layers of the shared trunk."),
+    seed: int = seed_option(TrainConfig.seed, "Seed of the split, batch order, augmentation and weights."),
+    batch_size: int = typer.Option(TrainConfig.batch_size, "--batch-size", min=1, max=1_000_000),
+    lr: float = typer.Option(TrainConfig.lr, "--lr", min=0.0, help="Adam learning rate."),
+    weight_decay: float = typer.Option(
+        TrainConfig.weight_decay, "--weight-decay", min=0.0, help="AdamW weight decay (0: Adam)."
+    ),
+    hidden: int = typer.Option(
+        NetConfig.hidden, "--hidden", min=8, max=8192, help="Width of the shared trunk."
+    ),
+    layers: int = typer.Option(
+        NetConfig.layers, "--layers", min=1, max=64, help="Layers of the shared trunk."
+    ),
     components: int = typer.Option(
-        4, "--components", min=1, max=256, help="Gaussians per continuous head."
+        NetConfig.components, "--components", min=1, max=256, help="Gaussians per continuous head."
     ),
-    link_head: str = typer.Option(
-        "pointer", "--link-head", help="pointer (shared per-link scorer) or dense."
-    ),
+    link_head: Annotated[
+        LinkHead, typer.Option("--link-head", help="pointer (shared per-link scorer) or dense.")
+    ] = DEFAULT_LINK_HEAD,
     new_visits: bool = typer.Option(
-        True, "--new-visits/--no-new-visits", help="Condition on where the next state's new crossings land."
+        NetConfig.new_visits,
+        "--new-visits/--no-new-visits",
+        help="Condition on where the next state's new crossings land.",
     ),
     move: bool = typer.Option(
-        True, "--move/--no-move", help="Condition on the abstract move (R1/R2/Cross, segments, sides)."
+        NetConfig.move,
+        "--move/--no-move",
+        help="Condition on the abstract move (R1/R2/Cross, segments, sides).",
     ),
-    sources: str = typer.Option(
-        "collect",
-        "--from",
-        help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
+    sources: Annotated[
+        Sources,
+        typer.Option(
+            "--from",
+            parser=parse_sources,
+            metavar="SOURCES",
+            help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
+        ),
+    ] = DEFAULT_SOURCES,
+    val_fraction: float = typer.Option(TrainConfig.val_fraction, "--val-fraction", min=0.0, max=0.9),
+    augment: bool = typer.Option(
+        TrainConfig.augment, "--augment/--no-augment", help="Mirror/Reverse augmentation."
     ),
-    val_fraction: float = typer.Option(0.1, "--val-fraction", min=0.0, max=0.9),
-    augment: bool = typer.Option(True, "--augment/--no-augment", help="Mirror/Reverse augmentation."),
     threads: int | None = typer.Option(
         None,
         "--threads",
@@ -77,31 +108,10 @@ def train_command(
         help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
     ),
     checkpoint_every_s: float = typer.Option(
-        30.0, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
+        TrainConfig.checkpoint_every_s, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
     ),
 ) -> None:
     """Train the inverse model on the collected transitions; checkpoints go to the database."""
-    import torch
-
-    from twisted.model.data import NoTrainingDataError
-    from twisted.model.network import NetConfig
-    from twisted.model.train import Progress as TrainProgress
-    from twisted.model.train import TrainConfig, train
-    from twisted.store.training import NonFiniteModelError, mark_training_failed
-
-    if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
-        fail(f"--device must be cpu or cuda, got {device!r}")
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        fail("--device cuda: no CUDA device is available to torch here; use --device cpu")
-    if link_head not in ("pointer", "dense"):
-        fail(f"--link-head must be pointer or dense, got {link_head!r}")
-    from twisted.model.data import SOURCES
-
-    chosen = tuple(dict.fromkeys(s.strip() for s in sources.split(",") if s.strip()))
-    if not chosen or any(s not in SOURCES for s in chosen):
-        fail(f"--from must be a comma-separated list of {', '.join(SOURCES)}, got {sources!r}")
-    if threads is not None:
-        torch.set_num_threads(threads)
     config = TrainConfig(
         epochs=epochs,
         hours=hours,
@@ -116,13 +126,28 @@ def train_command(
             hidden=hidden,
             layers=layers,
             components=components,
-            link_head=link_head,
+            link_head=value(link_head),
             new_visits=new_visits,
             move=move,
         ),
-        sources=chosen,
+        sources=tuple(sources),
     )
-    store = open_db(ctx)
+    store = open_db(ctx, create=False)  # training needs collected data: a new database has none
+    _train(store, config, resume, device, threads)
+
+
+def _train(store: Any, config: TrainConfig, resume: bool, device: str, threads: int | None) -> None:
+    """Train with a progress bar; print the stored model's figures."""
+    import torch
+
+    from twisted.model.data import NoTrainingDataError
+    from twisted.model.train import Progress as TrainProgress
+    from twisted.model.train import train
+    from twisted.store.training import NonFiniteModelError, mark_training_failed
+
+    if threads is not None:
+        torch.set_num_threads(threads)
+    epochs = config.epochs
 
     columns = (
         TextColumn("[bold]epoch {task.fields[epoch]}/{task.total}"),
@@ -168,6 +193,10 @@ def train_command(
 
             console.print("interrupted: checkpoint saved; continue with `twisted train --resume`")
             raise typer.Exit(runtime.exit_code(exc) or 130) from None
+    _print_trained(outcome)
+
+
+def _print_trained(outcome: Any) -> None:
     m = outcome.metrics
     if outcome.status != "finished":
         console.print(
@@ -199,11 +228,16 @@ def models_command(
         help="Write a model (newest, or --id) to this file, e.g. twisted/data/default_model.pt.",
     ),
     model_id: int | None = typer.Option(None, "--id", help="The model to export (default: the newest)."),
+    as_json: bool = json_option("the models"),
 ) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
     from twisted.model.registry import ModelError, default_model_path, list_models, load_model
 
-    store = open_db(ctx)
+    if export is not None:
+        problem = unwritable(Path(export))
+        if problem is not None:
+            fail(f"--export {export}: {problem}")
+    store = open_db(ctx, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
         try:
             model = load_model(store, model_id)
@@ -216,6 +250,9 @@ def models_command(
         console.print(f"model {model.model_id} written to {target} ({target.stat().st_size / 1e6:.1f} MB)")
         return
     models = list_models(store)
+    if as_json:
+        print_json([asdict(m) for m in models])
+        return
     if not models:
         path = default_model_path()
         shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"

@@ -21,6 +21,7 @@ from twisted.model.augment import (
     reverse_points,
     reverse_state,
 )
+from twisted.model.config import NetConfig
 from twisted.model.encoding import (
     GEOMETRY_DIM,
     MAX_CROSSINGS,
@@ -37,7 +38,7 @@ from twisted.model.encoding import (
     preprocess,
     target_to_curve,
 )
-from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig, astuple_shallow
+from twisted.model.network import Condition, InverseModel, InverseNet, astuple_shallow
 from twisted.moves import explains
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, RopeSim, sample_curve
 from twisted.topology import EMPTY, PData, top

@@ -24,7 +24,8 @@ from twisted.model.augment import (
     reverse_move,
     reverse_state,
 )
-from twisted.model.data import SOURCES, load_samples, load_tree_edges, split_by_start
+from twisted.model.config import SOURCES, TrainConfig
+from twisted.model.data import load_samples, load_tree_edges, split_by_start
 from twisted.model.encoding import (
     MOVE_DIM,
     MOVE_KINDS,
@@ -36,7 +37,7 @@ from twisted.model.encoding import (
 )
 from twisted.model.network import InverseModel
 from twisted.model.registry import list_models, load_model
-from twisted.model.train import TrainConfig, train
+from twisted.model.train import train
 from twisted.moves import Move, enumerate_states, explains, successors
 from twisted.proposals import across_curve
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve, RopeSim

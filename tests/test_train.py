@@ -13,11 +13,12 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from tests.test_model import SMALL, random_rope
+from twisted.model.config import TrainConfig
 from twisted.model.data import NoTrainingDataError, load_transitions, split_by_start
 from twisted.model.network import InverseModel, InverseNet
 from twisted.model.registry import ModelError, default_model_path, list_models, load_model
 from twisted.model.success import held_out_transitions, step_name
-from twisted.model.train import TrainConfig, train
+from twisted.model.train import train
 from twisted.sim import sample_curve
 from twisted.store import Configuration, Transition, open_store
 from twisted.store.queries import add_configuration, start_run

@@ -32,6 +32,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, aliased
 
 from twisted.model.augment import VARIANTS, apply_variant_p_data
+from twisted.model.config import SOURCES
 from twisted.model.encoding import (
     MAX_CROSSINGS,
     MOVE_DIM,
@@ -50,7 +51,6 @@ from twisted.topology import PData, parse_p_data
 
 __all__ = [
     "NoTrainingDataError",
-    "SOURCES",
     "TransitionData",
     "encode_pairs",
     "encode_states",
@@ -64,7 +64,6 @@ __all__ = [
 ]
 
 CHUNK_SIZE = 4096
-SOURCES = ("collect", "search")
 COLLECT, SEARCH = 0, 1
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -32,6 +32,7 @@ import numpy.typing as npt
 import torch
 from torch import nn
 
+from twisted.model.config import LINK_HEADS, NetConfig
 from twisted.model.encoding import (
     GEOMETRY_DIM,
     LINK_TOKEN_DIM,
@@ -55,7 +56,7 @@ from twisted.moves import Move, explains
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve
 from twisted.topology import PData, parse_p_data, top
 
-__all__ = ["Condition", "InverseModel", "InverseNet", "LINK_WEIGHT", "NetConfig"]
+__all__ = ["Condition", "InverseModel", "InverseNet", "LINK_WEIGHT"]
 
 # Bumped whenever inputs or layers change so that stored weights no longer fit; a stored model of
 # another version is refused with a clear message instead of producing garbage.
@@ -67,31 +68,6 @@ DEFAULT_LINK_TEMPERATURE = 0.5
 LINK_WEIGHT = 10.0  # loss = 10 x NLL(link) + NLL(z) + NLL(x) + NLL(y) (the reference's weighting)
 MAX_REDRAWS = 32
 LOG_STD_MIN, LOG_STD_MAX = -6.0, 1.0
-
-
-@dataclass(frozen=True)
-class NetConfig:
-    """Architecture of :class:`InverseNet` (stored with every model so it can be rebuilt)."""
-
-    hidden: int = 256
-    layers: int = 3
-    head_hidden: int = 128
-    components: int = 4
-    # "pointer": one scorer shared by the 21 links reads the context and each link's token;
-    # "dense": 21 logits straight from the context
-    link_head: str = "pointer"
-    # condition on where the next state's new crossing visits land on the current rope
-    new_visits: bool = True
-    # condition on the abstract move (R1 / R2 / Cross, segments, sides, over/under, sign)
-    move: bool = True
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> NetConfig:
-        d = {"move": False, **d}  # models stored before the move input had none
-        return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 
 def _mlp(sizes: list[int]) -> nn.Sequential:
@@ -170,9 +146,9 @@ class LinkScorer(nn.Module):
 class InverseNet(nn.Module):
     """The network; inputs are already encoded (:class:`Preprocessed`, :class:`Condition`)."""
 
-    def __init__(self, config: NetConfig = NetConfig()) -> None:
+    def __init__(self, config: NetConfig | None = None) -> None:
         super().__init__()
-        self.config = config
+        self.config = config = config or NetConfig()
         h = config.hidden
         new_dim = (NEW_DIM if config.new_visits else 0) + (MOVE_DIM if config.move else 0)
         self.token_dim = LINK_TOKEN_DIM + (NEW_LINK_DIM if config.new_visits else 0)
@@ -180,12 +156,12 @@ class InverseNet(nn.Module):
         self.trunk = nn.Sequential(
             _mlp([GEOMETRY_DIM + 2 * P_DATA_DIM + new_dim] + [h] * config.layers), nn.SiLU(), nn.LayerNorm(h)
         )
+        if config.link_head not in LINK_HEADS:
+            raise ValueError(f"link_head must be one of {', '.join(LINK_HEADS)}, got {config.link_head!r}")
         if config.link_head == "pointer":
             self.link_head: nn.Module = LinkScorer(h, self.token_dim, config.head_hidden)
-        elif config.link_head == "dense":
-            self.link_head = _mlp([h, config.head_hidden, N_LINKS])
         else:
-            raise ValueError(f"link_head must be 'pointer' or 'dense', got {config.link_head!r}")
+            self.link_head = _mlp([h, config.head_hidden, N_LINKS])
         # one-hot link, that link's token, every link centre relative to it (where the other strands are)
         link_dim = N_LINKS + self.token_dim + 2 * N_LINKS
         self.z_head = MixtureHead(h + link_dim, config.head_hidden, config.components)

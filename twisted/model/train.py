@@ -15,12 +15,13 @@ stored is the weights of the epoch with the lowest validation loss (small data o
 from __future__ import annotations
 
 import io
+import logging
 import math
 import shlex
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -28,8 +29,8 @@ import torch
 from sqlalchemy import delete, select
 
 from twisted.model.augment import VARIANTS, apply_variant
+from twisted.model.config import SOURCES, TrainConfig
 from twisted.model.data import (
-    SOURCES,
     NoTrainingDataError,
     TransitionData,
     load_samples,
@@ -39,54 +40,22 @@ from twisted.model.data import (
     split_by_start,
 )
 from twisted.model.encoding import preprocess
-from twisted.model.network import Condition, InverseModel, InverseNet, NetConfig
+from twisted.model.network import Condition, InverseModel, InverseNet
 from twisted.store.db import Store
 from twisted.store.models import utcnow
 from twisted.store.training import Checkpoint, TrainingRun
 
 __all__ = [
     "NoTrainingDataError",
-    "TrainConfig",
     "TrainOutcome",
     "Trainer",
     "train",
 ]
 
+logger = logging.getLogger(__name__)
+
 KEEP_CHECKPOINTS = 2
 EVAL_BATCH = 4096
-
-
-@dataclass
-class TrainConfig:
-    """Hyper-parameters of a run (stored in ``training_runs.parameters``)."""
-
-    epochs: int = 40
-    hours: float | None = None
-    batch_size: int = 256
-    lr: float = 1e-3
-    weight_decay: float = 0.0  # AdamW's decoupled decay (0: plain Adam, the reference)
-    seed: int = 0
-    val_fraction: float = 0.1
-    augment: bool = True
-    checkpoint_every_s: float = 30.0
-    net: NetConfig = field(default_factory=NetConfig)
-    # where the samples come from (twisted.model.data.SOURCES): collected transitions, planner trees
-    sources: tuple[str, ...] = ("collect",)
-    # the tree snapshot (newest search node id) of a run that reads "search"; set when it starts
-    max_search_node_id: int | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["net"] = self.net.to_dict()
-        d["sources"] = list(self.sources)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        d = dict(d)
-        net = NetConfig.from_dict(d.pop("net", {}))
-        d["sources"] = tuple(d.get("sources", ("collect",)))
-        return cls(net=net, **{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 
 def _generator(*parts: int) -> torch.Generator:
@@ -407,6 +376,15 @@ def train(
         + ")"
     )
 
+    logger.info(
+        "training run %d %s on %s: %d training / %d validation samples; parameters %s",
+        run_id,
+        "resumed" if resume else "started",
+        device,
+        len(train_data),
+        len(val_data),
+        config.to_dict(),
+    )
     trainer = Trainer(train_data, config, device)
     elapsed_before = 0.0
     if resume:
@@ -460,6 +438,16 @@ def train(
                     {"epoch": epoch, "elapsed_s": round(elapsed(), 1), "train_batch_loss": mean_loss, **val}
                 )
                 epoch_loss[:] = [0.0, 0]
+                logger.info(
+                    "training run %d epoch %d/%d: train loss %.4f, val NLL %s, link accuracy %s (%.0f s)",
+                    run_id,
+                    epoch + 1,
+                    config.epochs,
+                    mean_loss,
+                    _figure(val.get("val_loss")),
+                    _figure(val.get("val_link_accuracy")),
+                    elapsed(),
+                )
                 if val:
                     trainer.note_validation(epoch, val["val_loss"])
                 if progress is not None:
@@ -479,11 +467,13 @@ def train(
     except KeyboardInterrupt:
         _save_checkpoint(store, run_id, trainer, elapsed(), history)
         _set_status(store, run_id, "interrupted", elapsed())
+        logger.warning("training run %d interrupted at epoch %d: checkpoint saved", run_id, trainer.epoch)
         raise
 
     out_of_time = elapsed() >= budget_s
     if stopped and not out_of_time:
         _set_status(store, run_id, "interrupted", elapsed())
+        logger.info("training run %d stopped at epoch %d: checkpoint saved", run_id, trainer.epoch)
         return TrainOutcome(run_id, "interrupted", None, {"history": history}, len(train_data), len(val_data))
 
     if trainer.best_net is not None:
@@ -527,7 +517,20 @@ def train(
         row.status, row.ended_at, row.elapsed_s = "finished", utcnow(), elapsed()
         row.epochs_done = trainer.epoch
         row.metrics = {"history": history, "final": metrics}
+    logger.info(
+        "training run %d finished after %d epochs (%.0f s): model %d stored (best epoch %s, val NLL %s)",
+        run_id,
+        trainer.epoch,
+        elapsed(),
+        model_id,
+        trainer.best_epoch,
+        _figure(metrics.get("val_loss")),
+    )
     return TrainOutcome(run_id, "finished", model_id, metrics, len(train_data), len(val_data))
+
+
+def _figure(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
 
 
 def _set_status(store: Store, run_id: int, status: str, elapsed_s: float) -> None:

@@ -1,0 +1,135 @@
+"""The types of the options that are choices or lists, and the shared ``--json`` option.
+
+Choices are Enums built from the domain's own tuples (nothing is listed twice): typer offers them as
+choices in --help and refuses anything else with exit 2 ("Invalid value for '--heuristic'") while
+the command line is parsed, before any command runs. Lists (``--seeds``, ``--from``,
+``--goal-crossings``) and ``--device`` are parsed by their option the same way.
+"""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from typing import Any
+
+import typer
+
+from cli.app import MAX_SEED, shorten
+from twisted.model.config import DEVICES, LINK_HEADS, SOURCES, NetConfig, TrainConfig
+from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions
+
+MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
+
+# mypy cannot see members made from a tuple; the members are the tuple's strings (Planner("sac"))
+Planner = Enum("Planner", [(name, name) for name in PLANNERS], type=str)  # type: ignore[misc]
+Heuristic = Enum("Heuristic", [(name, name) for name in HEURISTICS], type=str)  # type: ignore[misc]
+LinkHead = Enum("LinkHead", [(name, name) for name in LINK_HEADS], type=str)  # type: ignore[misc]
+DEFAULT_PLANNER = Planner(PlannerOptions.planner)
+DEFAULT_LINK_HEAD = LinkHead(NetConfig.link_head)
+
+
+def value(choice: Enum | None) -> Any:
+    """The plain value of a choice (None stays None), as the domain takes it."""
+    return None if choice is None else choice.value
+
+
+def _bad(message: str) -> typer.BadParameter:
+    return typer.BadParameter(shorten(message))
+
+
+class Seeds(tuple[int, ...]):
+    """Sorted distinct seeds, from '0 1 2', '0,1,2', '0-4' or a mix (``--seeds``)."""
+
+
+def parse_seeds(text: str | Seeds) -> Seeds:
+    if isinstance(text, Seeds):
+        return text
+    seeds: set[int] = set()
+    for part in text.replace(",", " ").split():
+        try:
+            if "-" in part[1:]:
+                lo, hi = part.split("-", 1)
+                first, last = int(lo), int(hi)
+                if last < first:
+                    raise ValueError
+            else:
+                first = last = int(part)
+        except ValueError:
+            raise _bad(f"{part!r} is not a seed or a range like 0-4 (give e.g. '0 1 2' or '0-4')") from None
+        if first < 0 or last > MAX_SEED:
+            raise _bad(f"{part!r}: seeds are 0 to 2**63-1")
+        if last - first + 1 + len(seeds) > MAX_SEEDS:
+            raise _bad(f"at most {MAX_SEEDS:,} seeds per goal")
+        seeds.update(range(first, last + 1))
+    if not seeds:
+        raise _bad("give at least one seed")
+    return Seeds(sorted(seeds))
+
+
+def seeds_option() -> Any:
+    """``--seeds``, for ``Annotated[Seeds, seeds_option()] = DEFAULT_SEEDS``."""
+    return typer.Option(
+        "--seeds",
+        parser=parse_seeds,
+        metavar="SEEDS",
+        help="Planner seeds: '0 1 2', '0,1,2' or a range '0-4'.",
+    )
+
+
+DEFAULT_SEEDS = Seeds((0,))
+
+
+class Sources(tuple[str, ...]):
+    """Training sample sources, a comma-separated list of ``twisted.model.config.SOURCES`` (``--from``)."""
+
+
+DEFAULT_SOURCES = Sources(TrainConfig.sources)
+
+
+def parse_sources(text: str | Sources) -> Sources:
+    if isinstance(text, Sources):
+        return text
+    chosen = tuple(dict.fromkeys(s.strip() for s in text.split(",") if s.strip()))
+    if not chosen or any(s not in SOURCES for s in chosen):
+        raise _bad(f"give a comma-separated list of {', '.join(SOURCES)}, got {text!r}")
+    return Sources(chosen)
+
+
+class CrossingCounts(tuple[int, ...]):
+    """Sorted distinct crossing counts from '1,2,3' (``--goal-crossings``)."""
+
+
+def parse_crossing_counts(text: str | CrossingCounts) -> CrossingCounts:
+    if isinstance(text, CrossingCounts):
+        return text
+    try:
+        counts = sorted({int(part) for part in text.split(",") if part.strip()})
+    except ValueError:
+        raise _bad(f"give comma-separated integers like 1,2,3, got {text!r}") from None
+    if not counts:
+        raise _bad("is empty: give counts like 1,2,3")
+    return CrossingCounts(counts)
+
+
+def parse_device(text: str) -> str:
+    """A torch device of ``twisted.model.config.DEVICES`` (``cuda:N`` for one GPU of several) that is
+    there (``--device``)."""
+    kind, _, index = text.partition(":")
+    if kind not in DEVICES or (index and (kind == "cpu" or not index.isdigit())):
+        raise _bad(f"must be {' or '.join(DEVICES)} (or cuda:N), got {text!r}")
+    if kind == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise _bad(f"{text}: no CUDA device is available to torch here; use --device cpu")
+    return text
+
+
+def json_option(what: str) -> Any:
+    """The ``--json`` option of every command that lists or reports something."""
+    return typer.Option(False, "--json", help=f"Print {what} as JSON.")
+
+
+def print_json(data: Any, *, indent: int | None = 2) -> None:
+    """What ``--json`` prints: ``data`` as one JSON document on stdout (dates and paths as text)."""
+    typer.echo(json.dumps(data, default=str, indent=indent))

@@ -1,0 +1,77 @@
+"""The configurations of the inverse model and of its training, and the choices they take.
+
+Kept apart from :mod:`twisted.model.network` and :mod:`twisted.model.train` (which import torch) so
+that what reads them only to offer or check options (the CLI) stays light.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+__all__ = ["DEVICES", "LINK_HEADS", "NetConfig", "SOURCES", "TrainConfig"]
+
+# "pointer": one scorer shared by the 21 links reads the context and each link's token;
+# "dense": 21 logits straight from the context
+LINK_HEADS = ("pointer", "dense")
+# where training samples come from (twisted.model.data): collected transitions, planner tree edges
+SOURCES = ("collect", "search")
+# torch devices training runs on; "cuda:N" picks one GPU of several
+DEVICES = ("cpu", "cuda")
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Architecture of :class:`twisted.model.network.InverseNet` (stored with every model so it can be
+    rebuilt)."""
+
+    hidden: int = 256
+    layers: int = 3
+    head_hidden: int = 128
+    components: int = 4
+    link_head: str = LINK_HEADS[0]  # one of LINK_HEADS
+    # condition on where the next state's new crossing visits land on the current rope
+    new_visits: bool = True
+    # condition on the abstract move (R1 / R2 / Cross, segments, sides, over/under, sign)
+    move: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> NetConfig:
+        d = {"move": False, **d}  # models stored before the move input had none
+        return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
+
+
+@dataclass
+class TrainConfig:
+    """Hyper-parameters of a run (stored in ``training_runs.parameters``)."""
+
+    epochs: int = 40
+    hours: float | None = None
+    batch_size: int = 256
+    lr: float = 1e-3
+    weight_decay: float = 0.0  # AdamW's decoupled decay (0: plain Adam, the reference)
+    seed: int = 0
+    val_fraction: float = 0.1
+    augment: bool = True
+    checkpoint_every_s: float = 30.0
+    net: NetConfig = field(default_factory=NetConfig)
+    # where the samples come from (SOURCES): collected transitions, planner trees
+    sources: tuple[str, ...] = ("collect",)
+    # the tree snapshot (newest search node id) of a run that reads "search"; set when it starts
+    max_search_node_id: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["net"] = self.net.to_dict()
+        d["sources"] = list(self.sources)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        d = dict(d)
+        net = NetConfig.from_dict(d.pop("net", {}))
+        d["sources"] = tuple(d.get("sources", ("collect",)))
+        return cls(net=net, **{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
