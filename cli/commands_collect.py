@@ -10,7 +10,7 @@ from rich.progress import BarColumn, Progress, TextColumn
 from rich.table import Table
 
 from cli.app import EXIT_BAD_INPUT, app, check_workers, console, fail, open_db, seed_option
-from cli.options import json_option, print_json
+from cli.options import json_option, print_json, ray_address_argument
 from twisted.runtime import signal_exit_code
 
 EXIT_FAILED = 1
@@ -63,12 +63,7 @@ def collect_command(
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
     ),
-    ray_address: str | None = typer.Argument(
-        None,
-        metavar="ADDRESS",
-        help="With --ray: the cluster (host:port, ray://host:10001, auto, local); default: the one "
-        "`ray start` runs here, else a new local one.",
-    ),
+    ray_address: str | None = ray_address_argument(),
 ) -> None:
     """Collect transitions that add crossings (D_Q reset scheme) into the database, resumably.
 

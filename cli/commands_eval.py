@@ -30,6 +30,7 @@ from cli.options import (
     Seeds,
     json_option,
     print_json,
+    ray_address_argument,
     seeds_option,
     value,
 )
@@ -286,12 +287,7 @@ def eval_command(
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
     ),
-    ray_address: str | None = typer.Argument(
-        None,
-        metavar="ADDRESS",
-        help="With --ray: the cluster (host:port, ray://host:10001, auto, local); default: the one "
-        "`ray start` runs here, else a new local one.",
-    ),
+    ray_address: str | None = ray_address_argument(),
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
     from twisted.distributed import DistributedError, import_ray, resolve_address

@@ -133,3 +133,13 @@ def json_option(what: str) -> Any:
 def print_json(data: Any, *, indent: int | None = 2) -> None:
     """What ``--json`` prints: ``data`` as one JSON document on stdout (dates and paths as text)."""
     typer.echo(json.dumps(data, default=str, indent=indent))
+
+
+def ray_address_argument() -> Any:
+    """The optional ADDRESS argument of the commands that take ``--ray`` (collect, eval)."""
+    return typer.Argument(
+        None,
+        metavar="ADDRESS",
+        help="With --ray: the cluster (host:port, ray://host:10001, auto, local); default: the one "
+        "`ray start` runs here, else a new local one.",
+    )
