@@ -168,15 +168,12 @@ def _check(request: _Request) -> None:
             'a goal is required: --goal P-DATA (e.g. \'[[1,"O",2,"+"],[2,"U",1,"+"]]\') or --knot '
             "NAME (e.g. overhand); or continue a stopped run with --resume [RUN_ID]"
         )
-    if request.resume and request.start_config is not None:
-        fail("--start-config cannot change the start of a resumed run")
-    if not request.resume:
-        from twisted.planner import PlanInputError, planner_options
+    from twisted.planner import PlanInputError, check_request
 
-        try:
-            planner_options(request.search_options)
-        except PlanInputError as exc:
-            fail(str(exc))
+    try:
+        check_request(request.search_options, resume=request.resume, start_config=request.start_config)
+    except PlanInputError as exc:
+        fail(str(exc))
 
 
 def _search(

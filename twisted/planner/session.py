@@ -38,6 +38,7 @@ __all__ = [
     "ReplayResult",
     "ReplayStep",
     "RunChoice",
+    "check_request",
     "choose_run",
     "curve_sampler",
     "high_level",
@@ -172,6 +173,18 @@ class RunChoice:
     model_id: int | None
 
 
+def check_request(
+    given: Mapping[str, Any], *, resume: bool, start_config: int | None = None
+) -> PlannerOptions | None:
+    """What can be checked of a plan request without the store (PlanInputError when it is wrong): a
+    new run's options (returned), or that a resumed run keeps its own start (None)."""
+    if resume:
+        if start_config is not None:
+            raise PlanInputError("--start-config cannot change the start of a resumed run")
+        return None
+    return planner_options(given)
+
+
 def choose_run(
     store: Any,
     goal: Goal | None,
@@ -190,8 +203,9 @@ def choose_run(
     live process, and it keeps its own options, start and model (those given must agree). Raises
     :class:`PlanInputError` when the run cannot be continued.
     """
-    if not resume:
-        return RunChoice(None, planner_options(given), model_id)
+    options = check_request(given, resume=resume, start_config=start_config)
+    if options is not None:
+        return RunChoice(None, options, model_id)
     from twisted.store.search import find_resumable_run, load_run
 
     if run_id is None:
@@ -205,8 +219,6 @@ def choose_run(
         raise PlanInputError(f"--resume {run_id}: there is no planner run {run_id} in this database")
     if goal is not None and info.goal.spec != goal.spec:
         raise PlanInputError(f"--resume {run_id}: that run's goal is {info.goal.spec}, not {goal.spec}")
-    if start_config is not None:
-        raise PlanInputError("--start-config cannot change the start of a resumed run")
     if info.outcome == "solved":
         raise PlanInputError(
             f"--resume {run_id}: run {run_id} already solved its goal (see `twisted replay {run_id}`)"
