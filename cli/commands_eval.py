@@ -184,9 +184,32 @@ def problems_list(
 
 
 def _eval(
-    ctx: typer.Context, request: EvalOptions, use_ray: bool = False, ray_address: str | None = None
-) -> Any:
-    from twisted.distributed import DistributedError, RayBackend
+    ctx: typer.Context,
+    requests: list[EvalOptions],
+    use_ray: bool = False,
+    ray_address: str | None = None,
+) -> list[Any]:
+    """Run the evaluations one after another; all of them are checked first, so that a bad second set
+    is refused before the first one runs."""
+    from twisted.distributed import RayBackend
+    from twisted.experiments import EvalInputError
+    from twisted.experiments.runner import prepare_eval
+
+    needed_by = "--set " + ", ".join(dict.fromkeys(r.set_name for r in requests))
+    summaries = []
+    with open_db(ctx, needed_by=needed_by) as store:
+        try:
+            for request in requests:
+                prepare_eval(store, request, 0 if use_ray else 1)
+        except EvalInputError as exc:
+            fail(str(exc))
+        for request in requests:
+            summaries.append(_eval_one(ctx, store, request, RayBackend(ray_address) if use_ray else None))
+    return summaries
+
+
+def _eval_one(ctx: typer.Context, store: Any, request: EvalOptions, backend: Any) -> Any:
+    from twisted.distributed import DistributedError
     from twisted.experiments import EvalInputError, run_eval
 
     columns = (
@@ -196,8 +219,7 @@ def _eval(
         TextColumn("solved {task.fields[solved]}"),
         TimeElapsedColumn(),
     )
-    needed_by = f"--set {request.set_name}"
-    with open_db(ctx, needed_by=needed_by) as store, Progress(*columns, console=console) as bar:
+    with Progress(*columns, console=console) as bar:
         task_id = None
 
         def on_start(summary: Any, pending: int) -> None:
@@ -217,7 +239,7 @@ def _eval(
                 store,
                 db_url(ctx),
                 request,
-                backend=RayBackend(ray_address) if use_ray else None,  # --ray: the same tasks as Ray tasks
+                backend=backend,  # --ray: the same tasks as Ray tasks
                 on_start=on_start,
                 on_outcome=on_outcome,
             )
@@ -235,8 +257,8 @@ def _eval(
         counts[o.status] = counts.get(o.status, 0) + 1
     ran = ", ".join(f"{n} {s}" for s, n in sorted(counts.items())) or "nothing left to run"
     console.print(
-        f"eval run {summary.eval_run_id} ({summary.planner}): {summary.total} goal x seed, "
-        f"{summary.already_done} finished before; this time: {ran}"
+        f"eval run {summary.eval_run_id} ({request.set_name}, {summary.planner}): {summary.total} goal x "
+        f"seed, {summary.already_done} finished before; this time: {ran}"
     )
     return summary
 
@@ -259,7 +281,12 @@ def _default_parallel() -> int:
 @app.command("eval")
 def eval_command(
     ctx: typer.Context,
-    set_name: str = typer.Option(..., "--set", help="Problem set (see `twisted problems list`)."),
+    set_names: Annotated[
+        list[str],
+        typer.Option(
+            "--set", help="Problem set (see `twisted problems list`); repeatable: the sets run in turn."
+        ),
+    ],
     planner: Annotated[
         Planner,
         typer.Option("--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."),
@@ -304,10 +331,13 @@ def eval_command(
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
     options = _planner_options(heuristic, model_id)
-    request = EvalOptions(
-        set_name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label
-    )
-    _eval(ctx, request, use_ray, ray_address)
+    requests = [
+        EvalOptions(
+            name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label
+        )
+        for name in dict.fromkeys(set_names)
+    ]
+    _eval(ctx, requests, use_ray, ray_address)
 
 
 @app.command("report")
@@ -358,11 +388,13 @@ def sensitivity_run(
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
     options = _planner_options(heuristic, model_id)
-    for scale in chosen:
-        request = EvalOptions(
+    requests = [
+        EvalOptions(
             set_name, value(planner), timeout_s, list(seeds), scale, workers, parallel, options, label
         )
-        _eval(ctx, request)
+        for scale in chosen
+    ]
+    _eval(ctx, requests)
 
 
 @sensitivity_app.command("plot")

@@ -96,6 +96,15 @@ def train_command(
             help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
         ),
     ] = DEFAULT_SOURCES,
+    hold_out_sets: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--hold-out-set",
+            metavar="SET",
+            help="Leave out the planner trees of runs towards this problem set's goals (the sets the "
+            "model is then evaluated on); repeatable. Needs --from ...search.",
+        ),
+    ] = None,
     val_fraction: float = typer.Option(TrainConfig.val_fraction, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(
         TrainConfig.augment, "--augment/--no-augment", help="Mirror/Reverse augmentation."
@@ -131,8 +140,18 @@ def train_command(
             move=move,
         ),
         sources=tuple(sources),
+        hold_out_sets=tuple(dict.fromkeys(hold_out_sets or [])),
     )
+    if config.hold_out_sets and "search" not in config.sources:
+        fail("--hold-out-set: only planner trees are held out; give --from search or --from collect,search")
     store = open_db(ctx, create=False)  # training needs collected data: a new database has none
+    if not resume:
+        from twisted.model.data import UnknownProblemSetError, check_hold_out_sets
+
+        try:
+            check_hold_out_sets(store, config.hold_out_sets)
+        except UnknownProblemSetError as exc:
+            fail(f"--hold-out-set: {exc}")
     _train(store, config, resume, device, threads)
 
 

@@ -416,3 +416,24 @@ def test_round_curve_steps() -> None:
         pytest.approx(-0.24),
         pytest.approx(0.44),
     )
+
+
+def test_eval_runs_each_set_given_and_checks_them_all_before_running_any(sqlite_url: str) -> None:
+    one = enumerate_states(1)[1][0]
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        for name in ("a", "b"):
+            save_problem_set(session, name, [ProblemRecord(None, 0, one, 0, "imported")], source="imported")
+    args = ["--planner", "random-low", "--timeout", "2", "--parallel", "1"]
+    runner = CliRunner()
+    # a set that does not exist, given second: refused before the first set runs
+    bad = runner.invoke(app, ["--db", sqlite_url, "eval", "--set", "a", "--set", "nope", *args])
+    assert bad.exit_code == 2 and "nope" in bad.output, bad.output
+    with open_store(sqlite_url) as store, store.session() as session:
+        assert session.scalar(select(EvalRun)) is None
+    good = runner.invoke(app, ["--db", sqlite_url, "eval", "--set", "a", "--set", "b", "--set", "a", *args])
+    assert good.exit_code == 0, good.output
+    with open_store(sqlite_url) as store, store.session() as session:
+        runs = list(session.scalars(select(EvalRun)))
+        results = list(session.scalars(select(EvalResult)))
+    assert len(runs) == 2 and len(results) == 2  # one run per set; a set given twice runs once
+    assert {r.set_id for r in results} == {r.set_id for r in runs} and len({r.set_id for r in runs}) == 2

@@ -42,9 +42,11 @@ from twisted.moves import Move, enumerate_states, explains, successors
 from twisted.proposals import across_curve
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve, RopeSim
 from twisted.store import Configuration, open_store
+from twisted.store.experiments import ProblemRecord, save_problem_set
 from twisted.store.models import array_to_blob
 from twisted.store.queries import get_or_create_state, start_run
 from twisted.store.search import SearchNode, SearchRunRow
+from twisted.store.training import TrainingRun
 from twisted.topology import PData, parse_p_data, top
 
 # ---- encoding --------------------------------------------------------------------------------------
@@ -156,9 +158,14 @@ def test_mirror_and_reverse_of_a_move_agree_with_the_physics() -> None:
 # ---- planner trees as training data ----------------------------------------------------------------
 
 
-def add_tree(url: str, start_configuration_id: int | None, seed: int, n_nodes: int = 12) -> list[int]:
-    """A synthetic planner tree (a 'plan' run): each node a random rope under a random earlier node.
-    Returns the node ids."""
+TREE_GOAL = PData.from_crossings([(1, 4, 1), (2, 3, -1), (5, 6, 1)])
+
+
+def add_tree(
+    url: str, start_configuration_id: int | None, seed: int, n_nodes: int = 12, goal_p: PData = TREE_GOAL
+) -> list[int]:
+    """A synthetic planner tree (a 'plan' run towards ``goal_p``): each node a random rope under a
+    random earlier node. Returns the node ids."""
     rng = np.random.default_rng(seed)
     store = open_store(url)
     ids: list[int] = []
@@ -166,7 +173,7 @@ def add_tree(url: str, start_configuration_id: int | None, seed: int, n_nodes: i
         run = start_run(session, "plan", {"synthetic": True}, seed=seed)
         root_pts = random_rope(seed * 1000, bend=0.0)
         nodes: list[tuple[int, PData]] = []
-        goal = get_or_create_state(session, PData.from_crossings([(1, 4, 1), (2, 3, -1), (5, 6, 1)]))
+        goal = get_or_create_state(session, goal_p)
         session.add(
             SearchRunRow(
                 run_id=run.id,
@@ -300,4 +307,50 @@ def test_a_model_trained_on_both_sources_loads_reports_them_and_samples_valid_cu
     assert "search" in result.output
     bad = CliRunner().invoke(app, ["--db", sqlite_url, "train", "--from", "collect,planner"])
     assert bad.exit_code == 2 and "--from" in bad.output
+    store.close()
+
+
+def test_held_out_sets_leave_out_the_trees_of_runs_towards_their_goals(sqlite_url: str) -> None:
+    fill_store(sqlite_url, 30)
+    other_goal = PData.from_crossings([(1, 2, 1)])
+    held = add_tree(sqlite_url, None, seed=5, goal_p=TREE_GOAL)
+    kept = add_tree(sqlite_url, None, seed=6, goal_p=other_goal)
+    store = open_store(sqlite_url)
+    with store.session(write=True) as session:
+        record = ProblemRecord(id=None, idx=0, p_data=TREE_GOAL, frequency=1, tag="test")
+        save_problem_set(session, "eval-3", [record], source="made")
+        save_problem_set(
+            session, "knot-set", [ProblemRecord(None, 0, TREE_GOAL, 1, "t", "knot:overhand@3")], source="made"
+        )
+    every = set(load_tree_edges(store).transition_ids.tolist())
+    assert every & set(held) and every & set(kept)
+    left = set(load_tree_edges(store, hold_out_sets=["eval-3"]).transition_ids.tolist())
+    assert left == every - set(held)
+    # a knot goal holds out the runs towards that knot (none here)
+    assert set(load_tree_edges(store, hold_out_sets=["knot-set"]).transition_ids.tolist()) == every
+    with store.session() as session:
+        runs_before = session.query(TrainingRun).count()
+    store.close()
+    runner = CliRunner()
+    # an unknown set: exit 2 naming the option and the sets there are, no training run stored
+    bad = runner.invoke(
+        app, ["--db", sqlite_url, "train", "--from", "collect,search", "--hold-out-set", "nope"]
+    )
+    assert bad.exit_code == 2 and "--hold-out-set" in bad.output and "eval-3" in bad.output, bad.output
+    # holding out without tree edges means nothing: refused before the database is opened
+    bad = runner.invoke(app, ["--db", sqlite_url, "train", "--hold-out-set", "eval-3"])
+    assert bad.exit_code == 2 and "--from" in bad.output, bad.output
+    store = open_store(sqlite_url)
+    with store.session() as session:
+        assert session.query(TrainingRun).count() == runs_before
+    outcome = train(
+        store,
+        TrainConfig(
+            epochs=1, batch_size=16, net=SMALL, sources=("collect", "search"), hold_out_sets=("eval-3",)
+        ),
+    )
+    assert outcome.status == "finished"
+    info = list_models(store)[0]
+    n_search = info.metrics["n_train_search"] + info.metrics["n_val_search"]
+    assert n_search == len(every - set(held))
     store.close()

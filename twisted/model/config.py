@@ -62,11 +62,15 @@ class TrainConfig:
     sources: tuple[str, ...] = ("collect",)
     # the tree snapshot (newest search node id) of a run that reads "search"; set when it starts
     max_search_node_id: int | None = None
+    # problem sets whose goals' planner trees are left out of "search" (the runs a model is then
+    # evaluated on would otherwise be in its own training data)
+    hold_out_sets: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["net"] = self.net.to_dict()
         d["sources"] = list(self.sources)
+        d["hold_out_sets"] = list(self.hold_out_sets)
         return d
 
     @classmethod
@@ -74,4 +78,5 @@ class TrainConfig:
         d = dict(d)
         net = NetConfig.from_dict(d.pop("net", {}))
         d["sources"] = tuple(d.get("sources", ("collect",)))
+        d["hold_out_sets"] = tuple(d.get("hold_out_sets", ()))
         return cls(net=net, **{k: v for k, v in d.items() if k in cls.__dataclass_fields__})

@@ -17,7 +17,8 @@ what inference is given). The train/validation split hashes the START configurat
 so validation never contains a start configuration seen in training: a transition's start is its
 ``from_configuration_id``; a tree edge's is its parent node (key ``-node id``), except that an edge
 from a tree's root takes the run's start configuration (the D_Q straight rope for runs from it), so
-that both sources put one configuration on one side.
+that both sources put one configuration on one side. Trees of runs whose goal is a goal of a
+held-out problem set (``hold_out_sets``: the sets a model is then evaluated on) are left out.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import torch
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, aliased
 
+from twisted.goals import make_goal
 from twisted.model.augment import VARIANTS, apply_variant_p_data
 from twisted.model.config import SOURCES
 from twisted.model.encoding import (
@@ -45,6 +47,7 @@ from twisted.model.encoding import (
 from twisted.moves import explains
 from twisted.sim import N_POINTS
 from twisted.store.db import Store
+from twisted.store.experiments import Problem, ProblemSet
 from twisted.store.models import Configuration, Run, TopologicalState, Transition, blob_to_array
 from twisted.store.search import SearchNode, SearchRunRow
 from twisted.topology import PData, parse_p_data
@@ -52,6 +55,8 @@ from twisted.topology import PData, parse_p_data
 __all__ = [
     "NoTrainingDataError",
     "TransitionData",
+    "UnknownProblemSetError",
+    "check_hold_out_sets",
     "encode_pairs",
     "encode_states",
     "load_samples",
@@ -207,9 +212,31 @@ def load_transitions(
     return load_samples(store, ("collect",), max_id=max_id, chunk_size=chunk_size, progress=progress)
 
 
-def load_tree_edges(store: Store, *, max_node_id: int | None = None) -> TransitionData:
-    """Every planner tree edge adding crossings (up to :data:`MAX_CROSSINGS`), node id <= ``max_node_id``."""
-    return load_samples(store, ("search",), max_node_id=max_node_id)
+def load_tree_edges(
+    store: Store, *, max_node_id: int | None = None, hold_out_sets: Sequence[str] = ()
+) -> TransitionData:
+    """Every planner tree edge adding crossings (up to :data:`MAX_CROSSINGS`), node id <= ``max_node_id``,
+    except in the trees of runs towards a goal of one of ``hold_out_sets``."""
+    return load_samples(store, ("search",), max_node_id=max_node_id, hold_out_sets=hold_out_sets)
+
+
+class UnknownProblemSetError(ValueError):
+    """A held-out problem set that the database does not have."""
+
+
+def check_hold_out_sets(store: Store, names: Sequence[str]) -> None:
+    """Raise :class:`UnknownProblemSetError` naming every set of ``names`` the store lacks."""
+    if not names:
+        return
+    with store.session() as session:
+        known = set(session.scalars(select(ProblemSet.name).where(ProblemSet.name.in_(list(names)))))
+        missing = [n for n in names if n not in known]
+        if missing:
+            have = sorted(session.scalars(select(ProblemSet.name)))
+            raise UnknownProblemSetError(
+                f"no problem set named {', '.join(repr(n) for n in missing)} in the database "
+                f"(it has: {', '.join(have) or 'none'})"
+            )
 
 
 def load_samples(
@@ -218,11 +245,13 @@ def load_samples(
     *,
     max_id: int | None = None,
     max_node_id: int | None = None,
+    hold_out_sets: Sequence[str] = (),
     chunk_size: int = CHUNK_SIZE,
     progress: Callable[[int, int], None] | None = None,
 ) -> TransitionData:
     """Samples of the given :data:`SOURCES`: transitions up to ``max_id``, tree edges up to
-    ``max_node_id`` (None: all). Raises :class:`NoTrainingDataError` when there are none."""
+    ``max_node_id`` (None: all) outside the trees of runs towards a goal of ``hold_out_sets``.
+    Raises :class:`NoTrainingDataError` when there are none."""
     unknown = [s for s in sources if s not in SOURCES]
     if unknown or not sources:
         raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(sources) or 'none'}")
@@ -231,7 +260,7 @@ def load_samples(
         if "collect" in sources:
             parts.append(_read_transitions(session, max_id, chunk_size, progress))
         if "search" in sources:
-            parts.append(_read_tree_edges(session, max_node_id))
+            parts.append(_read_tree_edges(session, max_node_id, hold_out_sets))
         n = sum(len(p.ids) for p in parts)
         if n == 0:
             raise _no_data(store, sources)
@@ -315,7 +344,7 @@ def _straight_rope_configuration(session: Session) -> int:
     return int(found or 0)
 
 
-def _read_tree_edges(session: Session, max_node_id: int | None) -> _Rows:
+def _read_tree_edges(session: Session, max_node_id: int | None, hold_out_sets: Sequence[str]) -> _Rows:
     parent = aliased(SearchNode)
     where = [
         SearchNode.parent_id.is_not(None),
@@ -323,6 +352,8 @@ def _read_tree_edges(session: Session, max_node_id: int | None) -> _Rows:
         SearchNode.cross > parent.cross,
         SearchNode.cross <= MAX_CROSSINGS,
     ] + ([SearchNode.id <= max_node_id] if max_node_id is not None else [])
+    if hold_out_sets:
+        where.append(SearchNode.run_id.not_in(_held_out_runs(session, hold_out_sets)))
     stmt = (
         select(
             SearchNode.id,
@@ -359,6 +390,35 @@ def _read_tree_edges(session: Session, max_node_id: int | None) -> _Rows:
         out.curves[i] = row[8:12]
         out.points[i] = blob_to_array(row[12], (N_POINTS, 3))
     return out
+
+
+def _held_out_runs(session: Session, set_names: Sequence[str]) -> list[int]:
+    """The planner runs towards a goal of the named problem sets: the same P-data goal, or for a knot goal
+    (``knot:<name>@<crossings>``) the same knot from the same crossing count."""
+    specs = session.scalars(
+        select(Problem.goal_key)
+        .join(ProblemSet, ProblemSet.id == Problem.set_id)
+        .where(ProblemSet.name.in_(list(set_names)))
+    ).all()
+    goals = [make_goal(spec) for spec in specs]
+    state_keys = [g.representative.key for g in goals if g.knot is None]
+    knots = {(g.knot, g.cross) for g in goals if g.knot is not None}
+    runs = set(
+        session.scalars(
+            select(SearchRunRow.run_id)
+            .join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id)
+            .where(SearchRunRow.goal_knot.is_(None), TopologicalState.key.in_(state_keys))
+        )
+    )
+    for knot, cross in knots:
+        runs.update(
+            session.scalars(
+                select(SearchRunRow.run_id).where(
+                    SearchRunRow.goal_knot == knot, SearchRunRow.goal_cross == cross
+                )
+            )
+        )
+    return sorted(runs)
 
 
 def max_search_node_id(store: Store) -> int | None:

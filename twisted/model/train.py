@@ -33,6 +33,7 @@ from twisted.model.config import SOURCES, TrainConfig
 from twisted.model.data import (
     NoTrainingDataError,
     TransitionData,
+    check_hold_out_sets,
     load_samples,
     load_transitions,
     max_search_node_id,
@@ -336,6 +337,7 @@ def train(
         found = max_transition_id(store) if "collect" in config.sources else None
         if "search" in config.sources:
             config = replace(config, max_search_node_id=max_search_node_id(store) or 0)
+        check_hold_out_sets(store, config.hold_out_sets)
         if found is None and "search" not in config.sources:
             # load_transitions raises the actionable "collect first" error
             load_transitions(store, max_id=0)
@@ -358,7 +360,13 @@ def train(
             session.flush()
             run_id = run.id
 
-    data = load_samples(store, config.sources, max_id=max_id, max_node_id=config.max_search_node_id)
+    data = load_samples(
+        store,
+        config.sources,
+        max_id=max_id,
+        max_node_id=config.max_search_node_id,
+        hold_out_sets=config.hold_out_sets,
+    )
     train_idx, val_idx = split_by_start(data.start_ids, config.val_fraction, config.seed)
     train_data, val_data = data.subset(train_idx), data.subset(val_idx)
     del data
