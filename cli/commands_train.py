@@ -247,15 +247,32 @@ def models_command(
         help="Write a model (newest, or --id) to this file, e.g. twisted/data/default_model.pt.",
     ),
     model_id: int | None = typer.Option(None, "--id", help="The model to export (default: the newest)."),
+    import_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--import",
+            metavar="FILE",
+            help="Store the model in this file (written by --export, or a shipped default_model.pt); it "
+            "becomes the newest, which the planner uses.",
+        ),
+    ] = None,
+    name: str | None = typer.Option(None, "--name", help="Name of the imported model (default: file name)."),
     as_json: bool = json_option("the models"),
 ) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
     from twisted.model.registry import ModelError, default_model_path, list_models, load_model
 
     if export is not None:
+        if import_file is not None:
+            fail("--export and --import: give one of them")
         problem = unwritable(Path(export))
         if problem is not None:
             fail(f"--export {export}: {problem}")
+    if import_file is not None:
+        _import_model(ctx, import_file, name, model_id)
+        return
+    if name is not None:
+        fail("--name names an imported model: give --import FILE too")
     store = open_db(ctx, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
         try:
@@ -301,3 +318,24 @@ def models_command(
             m.created_at.strftime("%Y-%m-%d %H:%M"),
         )
     console.print(table)
+
+
+def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: int | None) -> None:
+    """Check that ``path`` holds a loadable model, then store it (before that, nothing is opened)."""
+    from twisted.model.registry import ModelError, load_model_file, save_model
+
+    if model_id is not None:
+        fail("--id chooses a model to export: it cannot go with --import")
+    label = name if name is not None else path.stem
+    if not 1 <= len(label) <= 64:
+        fail(f"--name must have 1 to 64 characters, got {label!r}")
+    try:
+        model = load_model_file(path)
+    except ModelError as exc:
+        fail(f"--import {path}: {exc}")
+    store = open_db(ctx)
+    new_id = save_model(store, model, name=label)
+    console.print(
+        f"model {new_id} ({label}, trained on {model.metadata.get('data_size', '?')} samples) stored from "
+        f"{path}; it is the newest, so `twisted plan` and `twisted eval` use it unless given --model"
+    )

@@ -289,3 +289,35 @@ def test_time_budget_stops_early_and_still_stores_a_model(small_store: tuple[str
     with store.session() as session:
         run = session.get(TrainingRun, done.training_run_id)
         assert run.status == "finished" and run.epochs_done == 0
+
+
+def test_models_import_stores_an_exported_model_and_refuses_other_files(tmp_path) -> None:
+    runner = CliRunner()
+    url = f"sqlite:///{tmp_path / 'imp.db'}"
+    junk = tmp_path / "junk.pt"
+    junk.write_text("not a model")
+    for args, named in (
+        (["--import", str(junk)], "--import"),
+        (["--import", str(tmp_path / "missing.pt")], "--import"),
+        (["--name", "x"], "--import"),
+        (["--import", str(default_model_path()), "--export", str(tmp_path / "o.pt")], "--export"),
+    ):
+        result = runner.invoke(app, ["--db", url, "models", *args])
+        assert result.exit_code == 2 and named in result.output, (args, result.output)
+        assert not (tmp_path / "imp.db").exists()  # refused before the database is opened
+    args = ["--import", str(default_model_path()), "--name", "shipped"]
+    result = runner.invoke(app, ["--db", url, "models", *args])
+    assert result.exit_code == 0, result.output
+    store = open_store(url)
+    [info] = list_models(store)
+    assert info.name == "shipped" and info.training_run_id is None
+    model, shipped = load_model(store), load_model(None)
+    assert model.model_id == info.id and info.data_size == shipped.metadata["data_size"]
+    for a, b in zip(model.net.state_dict().values(), shipped.net.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+    store.close()
+    # exported again, it is the same model
+    out = tmp_path / "again.pt"
+    assert runner.invoke(app, ["--db", url, "models", "--export", str(out)]).exit_code == 0
+    again = InverseModel.from_bytes(out.read_bytes())
+    assert again.metadata == shipped.metadata

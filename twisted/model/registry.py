@@ -27,6 +27,7 @@ __all__ = [
     "list_models",
     "load_default_model",
     "load_model",
+    "load_model_file",
     "save_model",
 ]
 
@@ -99,6 +100,22 @@ def load_default_model() -> InverseModel:
             "train one with `twisted train`"
         )
     return _from_bytes(path.read_bytes(), None, f"the shipped default {path}")
+
+
+def load_model_file(path: Path) -> InverseModel:
+    """A model from a file written by ``twisted models --export`` (or a shipped default)."""
+    if not path.is_file():
+        raise ModelError("no such file" if not path.exists() else "not a file")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ModelError(f"cannot be read: {exc.strerror or exc}") from exc
+    try:
+        return InverseModel.from_bytes(data)
+    except Exception as exc:  # noqa: BLE001 (any file may be given: torch.load raises many kinds)
+        raise ModelError(
+            f"not an inverse model written by `twisted models --export` ({type(exc).__name__}: {exc})"
+        ) from exc
 
 
 def _from_bytes(data: bytes, model_id: int | None, what: str) -> InverseModel:
