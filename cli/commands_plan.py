@@ -391,6 +391,16 @@ def _begin(setup: _Setup, stop: Any) -> Any:
         fail(str(exc))
 
 
+def _model_json(sampler: Any) -> dict[str, Any]:
+    """The inverse model the search sampled from (``model_id`` None: the shipped default) and its training
+    samples per source; nothing for a planner without one."""
+    model = getattr(sampler, "model", None)
+    if model is None or not hasattr(model, "metadata"):
+        return {}
+    sources = model.metadata.get("data_sources") or {"collect": model.metadata.get("data_size")}
+    return {"model_id": model.model_id, "model_samples": sources}
+
+
 def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0) -> None:
     steps = [
         {"step": i, **_curve_row(node.curve), "cross": node.p_data.cross, "state": node.p_data.to_list()}
@@ -414,6 +424,7 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
             "plan": steps,
             "tighten": search.options.tighten,
             "pull_tests": search.pull_tests,
+            **_model_json(search.sampler),
         }
         print_json(payload, indent=None)
         return

@@ -13,6 +13,7 @@ from cli.main import app
 from twisted.experiments.problems import parse_goal_file
 from twisted.goals import Goal, GoalError, PlanInputError, goal_from_spec, knot_goal, make_goal, state_goal
 from twisted.knots import identify
+from twisted.model.registry import load_model
 from twisted.moves import Plan, enumerate_states, plans, plans_to_any
 from twisted.planner import high_level, replay
 from twisted.store import open_store
@@ -182,6 +183,9 @@ def test_plan_to_an_overhand_knot_solves_replays_and_is_stored(tmp_path: Path) -
     result = json.loads(out)
     assert result["solved"] and result["goal"] == "knot:overhand@3" and result["knot"] == "overhand"
     assert len(result["goal_states"]) == 4 and result["tighten"] is False and result["pull_tests"] == 0
+    # the database holds no model: the shipped default (no id) sampled the curves; its training data
+    shipped = load_model(None).metadata
+    assert result["model_id"] is None and result["model_samples"] == shipped["data_sources"]
     reached = parse_p_data(result["reached_state"])
     assert result["plan"][-1]["state"] == result["reached_state"]
     k = identify(reached)
