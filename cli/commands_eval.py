@@ -37,6 +37,7 @@ from cli.options import (
 
 if TYPE_CHECKING:
     from twisted.experiments import EvalOptions
+    from twisted.experiments.runner import PreparedEval
 
 problems_app = subcommands("problems", "Goal sets for evaluations (made from our data or imported).")
 sensitivity_app = subcommands("sensitivity", "Friction sensitivity: evaluate at 95/100/105 % and plot.")
@@ -193,27 +194,24 @@ def _eval(
     is refused before the first one runs."""
     from twisted.distributed import RayBackend
     from twisted.experiments import EvalInputError
-    from twisted.experiments.runner import prepare_eval
+    from twisted.experiments.runner import ProcessBackend, prepare_eval
 
+    backend = RayBackend(ray_address) if use_ray else ProcessBackend()
     needed_by = "--set " + ", ".join(dict.fromkeys(r.set_name for r in requests))
-    summaries = []
     with open_db(ctx, needed_by=needed_by) as store:
         try:
-            for request in requests:
-                prepare_eval(store, request, 0 if use_ray else 1)
+            prepared = [prepare_eval(store, request, backend.min_parallel) for request in requests]
         except EvalInputError as exc:
             fail(str(exc))
-        for request in requests:
-            summaries.append(_eval_one(ctx, store, request, RayBackend(ray_address) if use_ray else None))
-    return summaries
+        return [_eval_one(ctx, store, p, backend) for p in prepared]
 
 
-def _eval_one(ctx: typer.Context, store: Any, request: EvalOptions, backend: Any) -> Any:
+def _eval_one(ctx: typer.Context, store: Any, prepared: PreparedEval, backend: Any) -> Any:
     from twisted.distributed import DistributedError
-    from twisted.experiments import EvalInputError, run_eval
+    from twisted.experiments.runner import run_prepared
 
     columns = (
-        TextColumn(f"[bold]{request.set_name} / {request.planner} / friction {request.friction_scale:g}"),
+        TextColumn(f"[bold]{prepared.set_name} / {prepared.planner} / friction {prepared.friction_scale:g}"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("solved {task.fields[solved]}"),
@@ -235,15 +233,15 @@ def _eval_one(ctx: typer.Context, store: Any, request: EvalOptions, backend: Any
                 err_console.print(f"goal {outcome.goal_key} seed {outcome.seed} failed: {outcome.message}")
 
         try:
-            summary = run_eval(
+            summary = run_prepared(
                 store,
                 db_url(ctx),
-                request,
-                backend=backend,  # --ray: the same tasks as Ray tasks
+                prepared,
+                backend,  # --ray: the same tasks as Ray tasks
                 on_start=on_start,
                 on_outcome=on_outcome,
             )
-        except (EvalInputError, DistributedError) as exc:
+        except DistributedError as exc:
             fail(str(exc))
         except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM
             from twisted import runtime
@@ -257,7 +255,7 @@ def _eval_one(ctx: typer.Context, store: Any, request: EvalOptions, backend: Any
         counts[o.status] = counts.get(o.status, 0) + 1
     ran = ", ".join(f"{n} {s}" for s, n in sorted(counts.items())) or "nothing left to run"
     console.print(
-        f"eval run {summary.eval_run_id} ({request.set_name}, {summary.planner}): {summary.total} goal x "
+        f"eval run {summary.eval_run_id} ({prepared.set_name}, {summary.planner}): {summary.total} goal x "
         f"seed, {summary.already_done} finished before; this time: {ran}"
     )
     return summary

@@ -337,10 +337,10 @@ def _needs_stored(request: _Request) -> str | None:
 
 def _print_model(sampler: Any, used_model_id: int | None, as_json: bool) -> None:
     """Which inverse model the search samples from, and how many samples of each source trained it."""
-    model = getattr(sampler, "model", None)
-    if model is None or not hasattr(model, "metadata") or as_json:
+    info = _model_json(sampler)
+    if not info or as_json:
         return
-    sources = model.metadata.get("data_sources") or {"collect": model.metadata.get("data_size")}
+    sources = info["model_samples"]
     err_console.print(
         f"inverse model {'(shipped default)' if used_model_id is None else used_model_id}: trained on "
         + ", ".join(f"{n:,} {source}" for source, n in sources.items() if n)

@@ -145,13 +145,6 @@ def train_command(
     if config.hold_out_sets and "search" not in config.sources:
         fail("--hold-out-set: only planner trees are held out; give --from search or --from collect,search")
     store = open_db(ctx, create=False)  # training needs collected data: a new database has none
-    if not resume:
-        from twisted.model.data import UnknownProblemSetError, check_hold_out_sets
-
-        try:
-            check_hold_out_sets(store, config.hold_out_sets)
-        except UnknownProblemSetError as exc:
-            fail(f"--hold-out-set: {exc}")
     _train(store, config, resume, device, threads)
 
 
@@ -159,7 +152,7 @@ def _train(store: Any, config: TrainConfig, resume: bool, device: str, threads: 
     """Train with a progress bar; print the stored model's figures."""
     import torch
 
-    from twisted.model.data import NoTrainingDataError
+    from twisted.model.data import NoTrainingDataError, UnknownProblemSetError
     from twisted.model.train import Progress as TrainProgress
     from twisted.model.train import train
     from twisted.store.training import NonFiniteModelError, mark_training_failed
@@ -201,6 +194,8 @@ def _train(store: Any, config: TrainConfig, resume: bool, device: str, threads: 
             )
         except NoTrainingDataError as exc:
             fail(str(exc), EXIT_BAD_INPUT)
+        except UnknownProblemSetError as exc:  # train() checks the sets before it stores a run
+            fail(f"--hold-out-set: {exc}", EXIT_BAD_INPUT)
         except NonFiniteModelError as exc:
             if exc.training_run_id is not None:
                 mark_training_failed(store, exc.training_run_id, str(exc))

@@ -59,6 +59,7 @@ __all__ = [
     "prepare_eval",
     "result_key",
     "run_eval",
+    "run_prepared",
     "run_task",
     "schedule",
 ]
@@ -653,5 +654,19 @@ def run_eval(
     """
     chosen: EvalBackend = backend if backend is not None else ProcessBackend()
     prepared = prepare_eval(store, request, chosen.min_parallel)
-    with chosen.open(store, db_url, prepared.workers, prepared.parallel) as pool:
-        return schedule(store, prepared, pool, backend=chosen.name, on_outcome=on_outcome, on_start=on_start)
+    return run_prepared(store, db_url, prepared, chosen, on_outcome=on_outcome, on_start=on_start)
+
+
+def run_prepared(
+    store: Any,
+    db_url: str,
+    prepared: PreparedEval,
+    backend: EvalBackend,
+    *,
+    on_outcome: Callable[[TaskOutcome, EvalSummary], None] | None = None,
+    on_start: Callable[[EvalSummary, int], None] | None = None,
+) -> EvalSummary:
+    """:func:`run_eval` for inputs already checked by :func:`prepare_eval` (with ``backend.min_parallel``):
+    what runs several evaluations after checking them all uses."""
+    with backend.open(store, db_url, prepared.workers, prepared.parallel) as pool:
+        return schedule(store, prepared, pool, backend=backend.name, on_outcome=on_outcome, on_start=on_start)
