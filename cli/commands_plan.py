@@ -401,6 +401,11 @@ def _model_json(sampler: Any) -> dict[str, Any]:
     return {"model_id": model.model_id, "model_samples": sources}
 
 
+def _expand_share(result: Any) -> str:
+    expand = result.calls_by_source().get("random_expand", 0)
+    return f" ({expand} in random expansions)" if expand else ""
+
+
 def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0) -> None:
     steps = [
         {"step": i, **_curve_row(node.curve), "cross": node.p_data.cross, "state": node.p_data.to_list()}
@@ -418,6 +423,11 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
             "search_time_s": round(result.elapsed_s, 3),
             "setup_s": round(setup_s, 3),
             "sim_calls": result.sim_calls,
+            "sim_calls_by_source": result.calls_by_source(),
+            "plan_steps_by_move": {
+                kind: {"tried": tried, "reached": reached}
+                for kind, (tried, reached) in result.steps_by_move().items()
+            },
             "iterations": result.iterations,
             "nodes": result.nodes,
             "states": result.states,
@@ -434,7 +444,7 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
         f"  goal {search.goal.label}"
         + (f" reached {result.path[-1].p_data.key}" if result.path and search.goal.knot else "")
         + f"  search time {result.elapsed_s:.1f} s (set-up {setup_s:.1f} s)"
-        f"  simulator calls {result.sim_calls}"
+        f"  simulator calls {result.sim_calls}{_expand_share(result)}"
         f"  iterations {result.iterations}  nodes {result.nodes}  states {result.states}"
         + (f"  pull tests {search.pull_tests}" if search.options.tighten else ""),
         highlight=False,

@@ -74,6 +74,11 @@ def test_random_low_finds_a_one_crossing_plan_and_it_replays(db_url: str) -> Non
     assert result["solved"] and result["outcome"] == "solved"
     assert result["plan"][-1]["state"] == json.loads(ONE_CROSSING)
     assert result["sim_calls"] > 0 and result["search_time_s"] > 0
+    # every simulator call is counted under the source of its curve
+    assert sum(result["sim_calls_by_source"].values()) == result["sim_calls"]
+    assert set(result["sim_calls_by_source"]) <= {"follow_plan", "random_expand"}
+    for steps in result["plan_steps_by_move"].values():
+        assert 0 <= steps["reached"] <= steps["tried"]
     # the stored path is the printed one, and replaying it in a fresh simulator ends in the goal
     with open_store(db) as store:
         replayed = replay(store, result["run_id"])
@@ -109,6 +114,16 @@ def test_tree_keeps_only_results_that_do_not_lose_crossings_nor_overshoot(tmp_pa
         with store.session() as session:
             stored = session.scalar(select(func.count()).select_from(SearchNode))
         assert stored == len(tree) == result.nodes
+    # the counts per source add up to the calls and to the nodes below the root
+    by_source = result.stats["calls"]
+    assert set(by_source) == {"follow_plan", "random_expand"}  # p_expand 0.5 over 6 iterations
+    assert sum(calls for calls, _ in by_source.values()) == result.sim_calls
+    assert sum(kept for _, kept in by_source.values()) == len(tree) - 1
+    # one follow_plan step per iteration that selected a plan from the root, more when it hit
+    tried = sum(t for t, _ in result.steps_by_move().values())
+    reached = sum(r for _, r in result.steps_by_move().values())
+    assert result.iterations <= tried and reached <= tried
+    assert tried * options.k == result.calls_by_source()["follow_plan"]
 
 
 
@@ -222,6 +237,11 @@ def test_stop_and_resume_gives_the_same_tree_as_one_run(db_url: str) -> None:
         rest = resumed.run(max_iterations=6)
         assert rest.run_id == first.run_id and rest.iterations == 6
         assert rest.sim_calls == whole.sim_calls
+        # the move and call counts survive the store like the selection statistics
+        whole_result = load_run(store, whole.run_id, with_nodes=False)
+        assert whole_result is not None and whole_result.checkpoint is not None
+        assert rest.stats == whole_result.checkpoint.stats
+        assert sum(rest.calls_by_source().values()) == rest.sim_calls
         assert rest.elapsed_s > half.elapsed_s
         a, b = _tree_signature(store, whole.run_id), _tree_signature(store, first.run_id)
         assert a == b

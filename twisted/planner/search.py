@@ -49,6 +49,7 @@ from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
 __all__ = [
+    "CALL_SOURCES",
     "HEURISTICS",
     "PLANNERS",
     "Checkpoint",
@@ -65,6 +66,11 @@ __all__ = [
 
 PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
+# Tables of the search's statistics (kept in every checkpoint): [times selected, summed reward] per
+# state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
+# [simulator calls, results kept in T] per source of curves (CALL_SOURCES)
+STATS_TABLES = ("state", "plan", "move", "calls")
+CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
 @dataclass(frozen=True)
@@ -243,10 +249,19 @@ class SearchResult:
     nodes: int
     states: int
     path: list[Node] = field(default_factory=list)
+    stats: dict[str, Any] = field(default_factory=dict)  # the checkpoint's tables (STATS_TABLES)
 
     @property
     def solved(self) -> bool:
         return self.status == "solved"
+
+    def calls_by_source(self) -> dict[str, int]:
+        """Simulator calls per source of curves (CALL_SOURCES); they add up to ``sim_calls``."""
+        return {source: int(entry[0]) for source, entry in self.stats.get("calls", {}).items()}
+
+    def steps_by_move(self) -> dict[str, tuple[int, int]]:
+        """(follow_plan steps tried, steps that reached the plan's next state) per move kind."""
+        return {kind: (int(entry[0]), int(entry[1])) for kind, entry in self.stats.get("move", {}).items()}
 
 
 class _Stop(Exception):
@@ -298,14 +313,14 @@ class Twisted:
         self.iteration = 0
         self.elapsed_before_s = 0.0
         self.sim_calls = 0
-        # selection statistics: [times selected, summed reward] per state and per (state, plan)
-        self.stats: dict[str, dict[str, list[float]]] = {"state": {}, "plan": {}}
+        self.stats: dict[str, dict[str, list[float]]] = {table: {} for table in STATS_TABLES}
         if checkpoint is not None:
             self.rng.bit_generator.state = checkpoint.rng_state
             self.iteration = checkpoint.iteration
             self.elapsed_before_s = checkpoint.elapsed_s
             self.sim_calls = checkpoint.sim_calls
-            self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in ("state", "plan")}
+            # a checkpoint written before the move and calls tables existed starts them empty
+            self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in STATS_TABLES}
 
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
         self.plans: dict[str, list[Any]] = {}
@@ -419,6 +434,7 @@ class Twisted:
             nodes=committed,
             states=len({self.tree.nodes[i].p_data.key for i in range(committed)}),
             path=self.tree.path(self.goal_node.index) if self.goal_node is not None else [],
+            stats=self._boundary.stats,
         )
 
     def _rollback(self, committed: int) -> None:
@@ -498,10 +514,8 @@ class Twisted:
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
         """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
-        for table, key in (("state", s), ("plan", f"{s}|{plan_index}")):
-            entry = self.stats[table].setdefault(key, [0.0, 0.0])
-            entry[0] += 1.0
-            entry[1] += reward
+        self._count("state", s, 1, reward)
+        self._count("plan", f"{s}|{plan_index}", 1, reward)
 
     # -- FollowPlan / RandomExpand -------------------------------------------------------------------
 
@@ -512,10 +526,11 @@ class Twisted:
             if step:
                 self._check_stop(self._deadline_s)
             curves = self.sampler.sample(current, next_state, move, self.options.k, self.rng)
-            children = self.simulate(current, curves)
+            children = self.simulate(current, curves, "follow_plan")
+            hit = next((c for c in children if c is not None and c.p_data == next_state), None)
+            self._count("move", str(move.kind), 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
-            hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             if hit is None:
                 return step
             current = hit
@@ -530,19 +545,23 @@ class Twisted:
         for start in range(0, len(curves), chunk):
             if start:
                 self._check_stop(self._deadline_s)
-            self.simulate(node, curves[start:start + chunk])
+            self.simulate(node, curves[start:start + chunk], "random_expand")
             if self.goal_node is not None:
                 return
 
     def low_level_only_step(self) -> None:
         """Baseline: K random curves from a uniformly chosen node of ``T``; only the goal test guides it."""
         node = self.tree.nodes[int(self.rng.integers(len(self.tree)))]
-        self.simulate(node, self.random_curves.sample(node, None, None, self.options.k, self.rng))
+        curves = self.random_curves.sample(node, None, None, self.options.k, self.rng)
+        self.simulate(node, curves, "low_level_only")
 
     # -- simulation and growing T -----------------------------------------------------------------------
 
-    def simulate(self, parent: Node, curves: list[Any]) -> list[Node | None]:
-        """Apply ``curves`` to ``parent`` in the worker pool; add the kept results to ``T`` in curve order."""
+    def simulate(self, parent: Node, curves: list[Any], source: str) -> list[Node | None]:
+        """Apply ``curves`` to ``parent`` in the worker pool; add the kept results to ``T`` in curve order.
+
+        ``source`` (one of CALL_SOURCES) is what the calls and kept results are counted under.
+        """
         try:
             with self.stop.interruptible():
                 results = self.pool.run([(parent.q, curve) for curve in curves])
@@ -551,7 +570,14 @@ class Twisted:
         first_call = self.sim_calls + 1
         self.sim_calls += len(curves)
         pairs = enumerate(zip(curves, results, strict=True))
-        return [self.add_to_tree(parent, curve, result, first_call + i) for i, (curve, result) in pairs]
+        children = [self.add_to_tree(parent, curve, result, first_call + i) for i, (curve, result) in pairs]
+        self._count("calls", source, len(curves), sum(child is not None for child in children))
+        return children
+
+    def _count(self, table: str, key: str, first: float, second: float) -> None:
+        entry = self.stats[table].setdefault(key, [0.0, 0.0])
+        entry[0] += first
+        entry[1] += second
 
     def add_to_tree(self, parent: Node, curve: Any, result: Any, sim_call: int) -> Node | None:
         """Keep ``result`` when Cross does not drop (the paper's rule) and can still lead to the goal.
