@@ -261,13 +261,10 @@ def _eval_one(ctx: typer.Context, store: Any, prepared: PreparedEval, backend: A
     return summary
 
 
-def _planner_options(heuristic: Heuristic | None, model_id: int | None) -> dict[str, Any]:
-    options: dict[str, Any] = {}
-    if heuristic is not None:
-        options["heuristic"] = value(heuristic)
-    if model_id is not None:
-        options["model_id"] = model_id
-    return options
+def _planner_options(heuristic: Heuristic | None, model_id: int | None, **given: Any) -> dict[str, Any]:
+    """The planner options given (None: the planner's default), as the evaluation stores them."""
+    options: dict[str, Any] = {"heuristic": value(heuristic), "model_id": model_id, **given}
+    return {name: v for name, v in options.items() if v is not None}
 
 
 def _default_parallel() -> int:
@@ -306,8 +303,18 @@ def eval_command(
     model_id: int = typer.Option(
         None, "--model", help="Inverse model id (twisted) or policy checkpoint id (sac); default: the newest."
     ),
+    k: int | None = typer.Option(None, "--k", min=1, max=1000, help="Curves sampled per plan step (6)."),
+    p_expand: float | None = typer.Option(
+        None, "--p-expand", min=0.0, max=1.0, help="RandomExpand probability after a failed iteration (0.05)."
+    ),
+    k_expand: int | None = typer.Option(
+        None, "--k-expand", min=1, max=100_000, help="Curves per RandomExpand (100)."
+    ),
     label: str = typer.Option(
-        None, "--label", help="Name the results are stored under (default: planner[-heuristic])."
+        None,
+        "--label",
+        help="Name the results are stored under (default: planner[-heuristic]); results under one label "
+        "must share the planner, model, heuristic, --k, --p-expand and --k-expand.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
@@ -328,7 +335,7 @@ def eval_command(
     if not use_ray:
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
-    options = _planner_options(heuristic, model_id)
+    options = _planner_options(heuristic, model_id, k=k, p_expand=p_expand, k_expand=k_expand)
     requests = [
         EvalOptions(
             name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label

@@ -437,3 +437,34 @@ def test_eval_runs_each_set_given_and_checks_them_all_before_running_any(sqlite_
         results = list(session.scalars(select(EvalResult)))
     assert len(runs) == 2 and len(results) == 2  # one run per set; a set given twice runs once
     assert {r.set_id for r in results} == {r.set_id for r in runs} and len({r.set_id for r in runs}) == 2
+
+
+def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str) -> None:
+    """Finished results count as done for a later evaluation under the same label, so one with another
+    K (or model) is refused instead of silently reusing them; under its own label it runs with its K."""
+    one = enumerate_states(1)[1][0]
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        save_problem_set(session, "a", [ProblemRecord(None, 0, one, 0, "imported")], source="imported")
+    args = ["--db", sqlite_url, "eval", "--set", "a", "--planner", "random-low", "--timeout", "5"]
+    args += ["--parallel", "1"]
+    runner = CliRunner()
+    first = runner.invoke(app, [*args, "--label", "x"])
+    assert first.exit_code == 0, first.output
+    refused = runner.invoke(app, [*args, "--label", "x", "--k", "2"])
+    assert refused.exit_code == 2, refused.output
+    message = " ".join(refused.output.split())  # the console wraps long lines
+    assert "--label x:" in message and "k None (now 2)" in message
+    with open_store(sqlite_url) as store, store.session() as session:
+        assert len(list(session.scalars(select(EvalRun)))) == 1  # refused before a run was stored
+    again = runner.invoke(app, [*args, "--label", "x"])  # the same options: finished results reused
+    assert again.exit_code == 0 and "1 finished before" in " ".join(again.output.split()), again.output
+    other = runner.invoke(app, [*args, "--label", "x-k2", "--k", "2", "--p-expand", "0.5", "--k-expand", "3"])
+    assert other.exit_code == 0, other.output
+    with open_store(sqlite_url) as store, store.session() as session:
+        run = session.scalars(select(EvalRun).order_by(EvalRun.id.desc())).first()
+        assert run is not None and run.planner == "x-k2"
+        assert (run.parameters["k"], run.parameters["p_expand"], run.parameters["k_expand"]) == (2, 0.5, 3)
+        result = session.scalars(select(EvalResult).where(EvalResult.planner == "x-k2")).one()
+        plan_run = session.get(Run, result.plan_run_id)
+        assert plan_run is not None
+        assert (plan_run.parameters["k"], plan_run.parameters["p_expand"]) == (2, 0.5)

@@ -37,6 +37,7 @@ from twisted.runtime import sigterm_as_interrupt
 from twisted.store.experiments import (
     FINISHED_STATUSES,
     EvalResult,
+    EvalRun,
     ProblemSetRecord,
     end_eval_run,
     load_problem_set,
@@ -358,8 +359,9 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
             raise EvalInputError(str(exc)) from None
     with store.session() as session:
         record = load_problem_set(session, set_name)
-    if record is None:
-        raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
+        if record is None:
+            raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
+        _check_label_options(session, record, label, {**options, "planner": planner})
     return PreparedEval(
         set_name=set_name,
         planner=planner,
@@ -372,6 +374,34 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
         workers=workers,
         parallel=parallel,
     )
+
+
+# planner options that change what a result is: results stored under one label must agree on them
+RESULT_OPTIONS = ("planner", "model_id", "heuristic", "k", "p_expand", "k_expand")
+
+
+def _check_label_options(
+    session: Any, record: ProblemSetRecord, label: str, options: Mapping[str, Any]
+) -> None:
+    """Refuse to add results under ``label`` that were made with other planner options.
+
+    Finished results count as done for every later evaluation under the same label, so an
+    evaluation with another model or K would silently reuse them.
+    """
+    here = (EvalResult.set_id == record.id) & (EvalResult.planner == label)
+    runs = select(EvalResult.eval_run_id).where(here)
+    q = select(EvalRun.parameters).where(EvalRun.id.in_(runs))  # no DISTINCT: PostgreSQL's json has no "="
+    ours = {key: options.get(key) for key in RESULT_OPTIONS}
+    for (parameters,) in session.execute(q):
+        theirs = {key: (parameters or {}).get(key) for key in RESULT_OPTIONS}
+        differ = [
+            f"{key} {theirs[key]} (now {ours[key]})" for key in RESULT_OPTIONS if theirs[key] != ours[key]
+        ]
+        if differ:
+            raise EvalInputError(
+                f"--label {label}: the results on set {record.name!r} under this label were made with "
+                f"{', '.join(differ)}; give another --label"
+            )
 
 
 def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tuple[list[EvalTask], int]:
