@@ -256,7 +256,8 @@ class SearchResult:
         return self.status == "solved"
 
     def calls_by_source(self) -> dict[str, int]:
-        """Simulator calls per source of curves (CALL_SOURCES); they add up to ``sim_calls``."""
+        """Simulator calls per source of curves (CALL_SOURCES); they add up to ``sim_calls`` unless the
+        run was resumed from a checkpoint written before these counts were kept."""
         return {source: int(entry[0]) for source, entry in self.stats.get("calls", {}).items()}
 
     def steps_by_move(self) -> dict[str, tuple[int, int]]:
