@@ -29,6 +29,9 @@ from cli.options import (
     Planner,
     Seeds,
     json_option,
+    k_expand_option,
+    k_option,
+    p_expand_option,
     print_json,
     ray_address_argument,
     seeds_option,
@@ -303,13 +306,9 @@ def eval_command(
     model_id: int = typer.Option(
         None, "--model", help="Inverse model id (twisted) or policy checkpoint id (sac); default: the newest."
     ),
-    k: int | None = typer.Option(None, "--k", min=1, max=1000, help="Curves sampled per plan step (6)."),
-    p_expand: float | None = typer.Option(
-        None, "--p-expand", min=0.0, max=1.0, help="RandomExpand probability after a failed iteration (0.05)."
-    ),
-    k_expand: int | None = typer.Option(
-        None, "--k-expand", min=1, max=100_000, help="Curves per RandomExpand (100)."
-    ),
+    k: int | None = k_option(),
+    p_expand: float | None = p_expand_option(),
+    k_expand: int | None = k_expand_option(),
     label: str = typer.Option(
         None,
         "--label",

@@ -31,7 +31,16 @@ from cli.app import (
     open_db,
     seed_option,
 )
-from cli.options import Heuristic, Planner, json_option, print_json, value
+from cli.options import (
+    Heuristic,
+    Planner,
+    json_option,
+    k_expand_option,
+    k_option,
+    p_expand_option,
+    print_json,
+    value,
+)
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
@@ -73,15 +82,9 @@ def plan_command(
         2, "--workers", help="Simulator processes (1: in this process; at most 4 per CPU core)."
     ),
     seed: int | None = seed_option(None, "Seed of the search (default 0)."),
-    k: int | None = typer.Option(
-        None, "--k", min=1, max=1000, help="Curves sampled per plan step (default 6)."
-    ),
-    p_expand: float | None = typer.Option(
-        None, "--p-expand", min=0.0, max=1.0, help="RandomExpand probability after a failed iteration (0.05)."
-    ),
-    k_expand: int | None = typer.Option(
-        None, "--k-expand", min=1, max=100_000, help="Curves per RandomExpand (100)."
-    ),
+    k: int | None = k_option(),
+    p_expand: float | None = p_expand_option(),
+    k_expand: int | None = k_expand_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),

@@ -125,6 +125,31 @@ def parse_device(text: str) -> str:
     return text
 
 
+def k_option() -> Any:
+    """``--k`` of the commands that run the planner (plan, eval); None: PlannerOptions.k."""
+    return typer.Option(
+        None, "--k", min=1, max=1000, help=f"Curves sampled per plan step (default {PlannerOptions.k})."
+    )
+
+
+def p_expand_option() -> Any:
+    """``--p-expand`` of the commands that run the planner; None: PlannerOptions.p_expand."""
+    return typer.Option(
+        None,
+        "--p-expand",
+        min=0.0,
+        max=1.0,
+        help=f"RandomExpand probability after a failed iteration ({PlannerOptions.p_expand}).",
+    )
+
+
+def k_expand_option() -> Any:
+    """``--k-expand`` of the commands that run the planner; None: PlannerOptions.k_expand."""
+    return typer.Option(
+        None, "--k-expand", min=1, max=100_000, help=f"Curves per RandomExpand ({PlannerOptions.k_expand})."
+    )
+
+
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")
