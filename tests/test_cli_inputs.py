@@ -104,6 +104,7 @@ BAD: dict[str, list[tuple[list[str], str] | tuple[list[str], str, str]]] = {
         (["--set", "s", "--seeds", "5-1"], "'--seeds'"),
         (["--set", "s", "--seeds", "-1"], "'--seeds'"),
         (["--set", "s", "--seeds", ""], "'--seeds'"),
+        (["--set", "s", "--seeds", "2", "3"], "unexpected argument '3'", "several seeds go in one argument"),
         (["--set", "s", "--timeout", "-1"], "'--timeout'"),
         (["--set", "s", "--friction-scale", "0"], "'--friction-scale'"),
         (["--set", "s", "--workers", "0"], "'--workers'"),

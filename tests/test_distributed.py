@@ -203,6 +203,8 @@ def test_resolve_address() -> None:
     assert resolve_address(False, None) is None
     with pytest.raises(DistributedError, match="goes after --ray"):
         resolve_address(False, "10.0.0.1:6379")
+    with pytest.raises(DistributedError, match="several seeds go in one argument"):
+        resolve_address(False, "3")  # what `--seeds 2 3` leaves over
 
 
 def test_ray_cluster_reuses_the_connection_it_finds() -> None:

@@ -480,7 +480,11 @@ def resolve_address(use_ray: bool, address: str | None) -> str | None:
     ``ray start`` runs here, else a local one" (see :func:`ray_cluster`).
     """
     if address is not None and not use_ray:
-        raise DistributedError(f"unexpected argument {address!r}: a Ray address goes after --ray")
+        hint = ""
+        if address.strip().isdigit():  # `--seeds 2 3`: the option takes one argument
+            stray = address.strip()
+            hint = f"; several seeds go in one argument: --seeds '<seeds> {stray}' or comma-separated"
+        raise DistributedError(f"unexpected argument {address!r}: a Ray address goes after --ray{hint}")
     if address is not None and not address.strip():
         raise DistributedError(
             "--ray: the address is empty (give host:port, ray://host:10001, auto or local)"
