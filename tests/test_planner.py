@@ -156,7 +156,7 @@ def test_a_resumed_run_keeps_its_options() -> None:
 # --- selection heuristics --------------------------------------------------------------------------------
 
 
-def _search_with_states(states: list[str], heuristic: str, goal: str, **options: Any) -> Twisted:
+def _search_with_states(states: list[str], heuristic: str, goal: str) -> Twisted:
     """A search whose tree holds one node per state (no simulation is needed to select)."""
     q, points, p0 = straight_rope()
     tree = SearchTree()
@@ -164,7 +164,7 @@ def _search_with_states(states: list[str], heuristic: str, goal: str, **options:
         p = parse_p_data(state)
         tree.add(Node(i, None if i == 0 else 0, q, points, p, None, 0, 0))
     g = check_goal(goal)
-    options = PlannerOptions(heuristic=heuristic, seed=7, **options)
+    options = PlannerOptions(heuristic=heuristic, seed=7)
     return Twisted(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
 
 
@@ -211,33 +211,6 @@ def test_states_off_every_plan_are_not_candidates() -> None:
     wrong = '[[1,"O",2,"-"],[2,"U",1,"-"]]'
     search = _search_with_states(["[]", wrong], "crs", GOAL_3)
     assert search.candidate_states == [EMPTY.key]
-
-
-@pytest.mark.parametrize(("retry_weight", "share"), [(0.1, 0.05 / 0.55), (1.0, 0.5)])
-def test_a_tried_node_and_next_state_pair_is_drawn_again_with_the_retry_weight(
-    retry_weight: float, share: float
-) -> None:
-    # two nodes in the straight state, a 1-crossing goal: every plan asks both for the same next state
-    search = _search_with_states(["[]", "[]"], "crs", ONE_CROSSING, retry_weight=retry_weight)
-    goal_key = parse_p_data(ONE_CROSSING).key
-    assert {plan.states[1].key for plan in search.plans[EMPTY.key]} == {goal_key}
-    search.stats["pair"][f"0|{goal_key}"] = [1.0, 0.0]  # node 0 was tried once for it
-    counts = Counter(search.select_start(EMPTY.key)[3].index for _ in range(4000))
-    # kept at the first draw with 1/2 x 0.1 (node 0) or 1/2 (node 1), else drawn again
-    assert counts[0] / 4000 == pytest.approx(share, abs=0.025), counts
-    # once every pair was tried, the least tried draw is taken
-    search.stats["pair"][f"1|{goal_key}"] = [40.0, 0.0]
-    if retry_weight < 1.0:
-        assert {search.select_start(EMPTY.key)[3].index for _ in range(50)} == {0}
-
-
-def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() -> None:
-    stored = PlannerOptions(seed=3).to_dict()
-    del stored["retry_weight"]
-    assert PlannerOptions.from_dict(stored).retry_weight == 1.0
-    assert PlannerOptions().retry_weight < 1.0
-    with pytest.raises(PlanInputError, match=r"retry_weight must lie in \(0, 1\], got 0"):
-        planner_options({"retry_weight": 0.0})
 
 
 # --- persistence: checkpoint, resume, determinism ----------------------------------------------------------

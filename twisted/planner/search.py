@@ -68,11 +68,9 @@ PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
 # Tables of the search's statistics (kept in every checkpoint): [times selected, summed reward] per
 # state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
-# [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
-# (node index, requested next state) pair of follow_plan (read by the retry weight)
-STATS_TABLES = ("state", "plan", "move", "calls", "pair")
+# [simulator calls, results kept in T] per source of curves (CALL_SOURCES)
+STATS_TABLES = ("state", "plan", "move", "calls")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
-RETRY_DRAWS = 20  # draws of (state, plan, node) per iteration at most (PlannerOptions.retry_weight)
 
 
 @dataclass(frozen=True)
@@ -87,9 +85,6 @@ class PlannerOptions:
     plan_limit: int = 100  # high-level plans kept per reached state
     seed: int = 0
     ucb_c: float = 0.7  # exploration weight of the ucb heuristic (rewards lie in [0, 1])
-    # a (node, next state) pair already tried n times is kept with probability retry_weight**n when
-    # choosing where to follow a plan, else the choice is drawn again (1: the paper's uniform choice)
-    retry_weight: float = 0.1
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -107,8 +102,6 @@ class PlannerOptions:
             raise ValueError(f"k_expand must be at least 1, got {self.k_expand}")
         if self.plan_limit < 1:
             raise ValueError(f"plan_limit must be at least 1, got {self.plan_limit}")
-        if not 0.0 < self.retry_weight <= 1.0:
-            raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -120,15 +113,13 @@ class PlannerOptions:
             "plan_limit": self.plan_limit,
             "seed": self.seed,
             "ucb_c": self.ucb_c,
-            "retry_weight": self.retry_weight,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
-        """The options a run stored; a run stored before ``retry_weight`` existed chose uniformly."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, **known})
+        return cls(**known)
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -203,7 +194,8 @@ class CurveSampler(Protocol):
 
     def sample(
         self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
-    ) -> list[Any]: ...
+    ) -> list[Any]:
+        ...
 
 
 class RandomCurves:
@@ -220,7 +212,8 @@ class RandomCurves:
 
 
 class Pool(Protocol):
-    def run(self, jobs: Sequence[tuple[np.ndarray, Any]]) -> list[Any]: ...
+    def run(self, jobs: Sequence[tuple[np.ndarray, Any]]) -> list[Any]:
+        ...
 
 
 @dataclass
@@ -327,7 +320,7 @@ class Twisted:
             self.iteration = checkpoint.iteration
             self.elapsed_before_s = checkpoint.elapsed_s
             self.sim_calls = checkpoint.sim_calls
-            # a checkpoint written before a table existed starts it empty
+            # a checkpoint written before the move and calls tables existed starts them empty
             self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in STATS_TABLES}
 
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
@@ -378,7 +371,7 @@ class Twisted:
 
     def _save(self, upto: int, checkpoint: Checkpoint) -> None:
         if self.recorder is not None:
-            self.recorder.save(self.tree.nodes[self._saved : upto], checkpoint)
+            self.recorder.save(self.tree.nodes[self._saved:upto], checkpoint)
         self._saved = upto
         self._last_save = time.perf_counter()
 
@@ -462,7 +455,8 @@ class Twisted:
             # no reached state has a plan to the goal: only random curves can make progress
             self.random_expand()
             return
-        s, plan_index, plan, node = self.select_start(s)
+        plan_index, plan = self.select_plan(s)
+        node = self.select_configuration(s)
         steps_done = self.follow_plan(node, plan)
         self.learn(s, plan_index, steps_done / len(plan.moves))
         if self.goal_node is None and self.rng.random() < self.options.p_expand:
@@ -514,33 +508,6 @@ class Twisted:
                 best, best_score = index, score
         return best, plans[best]
 
-    def select_start(self, s: str) -> tuple[str, int, Any, Node]:
-        """A state (``s``, drawn by the caller), a plan from it and a node in it: lines 5-7.
-
-        A plan step fails or succeeds by its (node, next state) pair far more than by the curves
-        drawn: a pair that failed once almost never succeeds when tried again (DESIGN 8). So a draw
-        whose pair was tried ``n`` times before is kept with probability ``retry_weight ** n``, else
-        all three are drawn again, at most ``RETRY_DRAWS`` times; then the least tried draw is taken.
-        An untried pair is kept without a random number, so ``retry_weight = 1`` replays the paper's
-        choice exactly.
-        """
-        best: tuple[float, tuple[str, int, Any, Node]] | None = None
-        for draw in range(RETRY_DRAWS):
-            if draw:
-                s = self.select_topological_state() or s
-            plan_index, plan = self.select_plan(s)
-            node = self.select_configuration(s)
-            tries = self.stats["pair"].get(f"{node.index}|{plan.states[1].key}", [0.0, 0.0])[0]
-            chosen = (s, plan_index, plan, node)
-            if tries == 0 or self.options.retry_weight == 1.0:
-                return chosen
-            if self.rng.random() < self.options.retry_weight**tries:
-                return chosen
-            if best is None or tries < best[0]:
-                best = (tries, chosen)
-        assert best is not None
-        return best[1]
-
     def select_configuration(self, s: str) -> Node:
         """A node of ``T`` in state ``s``, uniformly."""
         indices = self.tree.by_state[s]
@@ -563,7 +530,6 @@ class Twisted:
             children = self.simulate(current, curves, "follow_plan")
             hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             self._count("move", str(move.kind), 1, hit is not None)
-            self._count("pair", f"{current.index}|{next_state.key}", 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
@@ -580,7 +546,7 @@ class Twisted:
         for start in range(0, len(curves), chunk):
             if start:
                 self._check_stop(self._deadline_s)
-            self.simulate(node, curves[start : start + chunk], "random_expand")
+            self.simulate(node, curves[start:start + chunk], "random_expand")
             if self.goal_node is not None:
                 return
 
