@@ -6,8 +6,9 @@ For every finished evaluation result (grouped by set, label and seed) it reads t
 checkpoint: the simulator calls per source of curves (follow_plan: the sampler following a
 high-level plan; random_expand: the random curves of RandomExpand; low_level_only: the baseline)
 with the results kept in T, and per move kind how many follow_plan steps were tried and how many
-reached the plan's next state (K curves per step). Runs made before these counts were kept show
-only their totals. Prints one table; --json writes the figures.
+reached the plan's next state (K curves per step), and the share of steps that retried a (node,
+next state) pair tried before (what the planner's retry weight holds down). Runs made before these
+counts were kept show only their totals. Prints one table; --json writes the figures.
 """
 
 from __future__ import annotations
@@ -42,8 +43,18 @@ def main() -> None:
     args = ap.parse_args()
 
     store = open_store(args.db)
+
     def group() -> dict[str, Any]:
-        return {"runs": 0, "counted": 0, "solved": 0, "calls": 0, "to_solve": [], "calls_by": {}, "moves": {}}
+        return {
+            "runs": 0,
+            "counted": 0,
+            "solved": 0,
+            "calls": 0,
+            "to_solve": [],
+            "calls_by": {},
+            "moves": {},
+            "pairs": None,
+        }
 
     groups: dict[tuple[str, str, int], dict[str, Any]] = defaultdict(group)
     with store.session() as session:
@@ -76,10 +87,14 @@ def main() -> None:
                 g["counted"] += 1
                 _add(g["calls_by"], stats["calls"])
                 _add(g["moves"], stats.get("move", {}))
+            if "pair" in stats:
+                tries = [entry[0] for entry in stats["pair"].values()]
+                steps, retries = g["pairs"] or (0.0, 0.0)
+                g["pairs"] = (steps + sum(tries), retries + sum(max(n - 1.0, 0.0) for n in tries))
 
     header = (
         f"{'set':8} {'label':22} {'seed':>4} {'solved':>7} {'calls/solved':>12} {'calls':>8} "
-        f"{'follow':>7} {'expand':>7} {'kept f/e':>9}  steps reached/tried per move kind"
+        f"{'follow':>7} {'expand':>7} {'kept f/e':>9} {'retried':>7}  steps reached/tried per move kind"
     )
     print(header)
     figures = []
@@ -95,6 +110,8 @@ def main() -> None:
             if counted and total
             else f"{'-':>7} {'-':>7} {'-':>9}"
         )
+        pairs = g["pairs"] if g["counted"] == g["runs"] else None
+        retried = f"{pairs[1] / pairs[0]:7.0%}" if pairs and pairs[0] else f"{'-':>7}"
         moves = "  ".join(
             f"{kind} {int(reached)}/{int(tried)} ({reached / tried:.0%})"
             for kind, (tried, reached) in sorted(g["moves"].items())
@@ -102,7 +119,7 @@ def main() -> None:
         )
         print(
             f"{set_name:8} {label:22} {seed:>4} {g['solved']:>3}/{g['runs']:<3} {mean_to_solve:>12,.0f} "
-            f"{g['calls']:>8,} {share}  {moves if counted else '(run before the counts were kept)'}"
+            f"{g['calls']:>8,} {share} {retried}  {moves if counted else '(run before the counts were kept)'}"
         )
         figures.append(
             {
@@ -115,6 +132,7 @@ def main() -> None:
                 "calls": g["calls"],
                 "calls_by_source": by if counted else None,
                 "steps_by_move": g["moves"] if counted else None,
+                "retried_step_share": pairs[1] / pairs[0] if pairs and pairs[0] else None,
             }
         )
     if args.json:

@@ -34,6 +34,7 @@ from cli.options import (
     p_expand_option,
     print_json,
     ray_address_argument,
+    retry_weight_option,
     seeds_option,
     value,
 )
@@ -309,11 +310,12 @@ def eval_command(
     k: int | None = k_option(),
     p_expand: float | None = p_expand_option(),
     k_expand: int | None = k_expand_option(),
+    retry_weight: float | None = retry_weight_option(),
     label: str = typer.Option(
         None,
         "--label",
         help="Name the results are stored under (default: planner[-heuristic]); results under one label "
-        "must share the planner, model, heuristic, --k, --p-expand and --k-expand.",
+        "must share the planner, model, heuristic, --k, --p-expand, --k-expand and --retry-weight.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
@@ -334,7 +336,9 @@ def eval_command(
     if not use_ray:
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
-    options = _planner_options(heuristic, model_id, k=k, p_expand=p_expand, k_expand=k_expand)
+    options = _planner_options(
+        heuristic, model_id, k=k, p_expand=p_expand, k_expand=k_expand, retry_weight=retry_weight
+    )
     requests = [
         EvalOptions(
             name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label

@@ -39,6 +39,7 @@ from cli.options import (
     k_option,
     p_expand_option,
     print_json,
+    retry_weight_option,
     value,
 )
 
@@ -85,6 +86,7 @@ def plan_command(
     k: int | None = k_option(),
     p_expand: float | None = p_expand_option(),
     k_expand: int | None = k_expand_option(),
+    retry_weight: float | None = retry_weight_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
@@ -142,6 +144,7 @@ def plan_command(
             "k": k,
             "p_expand": p_expand,
             "k_expand": k_expand,
+            "retry_weight": retry_weight,
             "plan_limit": plan_limit,
             "tighten": True if tighten else None,
         },

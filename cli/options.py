@@ -150,6 +150,23 @@ def k_expand_option() -> Any:
     )
 
 
+def _check_retry_weight(weight: float | None) -> float | None:
+    if weight is not None and not 0.0 < weight <= 1.0:
+        raise _bad(f"--retry-weight {weight}: must lie in (0, 1]")
+    return weight
+
+
+def retry_weight_option() -> Any:
+    """``--retry-weight`` of the commands that run the planner; None: PlannerOptions.retry_weight."""
+    return typer.Option(
+        None,
+        "--retry-weight",
+        callback=_check_retry_weight,
+        help="Weight per earlier try of a (node, next state) pair when choosing where to follow a plan "
+        f"(1: the paper's uniform choice; default {PlannerOptions.retry_weight}).",
+    )
+
+
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

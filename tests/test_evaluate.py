@@ -458,7 +458,8 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
         assert len(list(session.scalars(select(EvalRun)))) == 1  # refused before a run was stored
     again = runner.invoke(app, [*args, "--label", "x"])  # the same options: finished results reused
     assert again.exit_code == 0 and "1 finished before" in " ".join(again.output.split()), again.output
-    other = runner.invoke(app, [*args, "--label", "x-k2", "--k", "2", "--p-expand", "0.5", "--k-expand", "3"])
+    variant = ["--k", "2", "--p-expand", "0.5", "--k-expand", "3", "--retry-weight", "1"]
+    other = runner.invoke(app, [*args, "--label", "x-k2", *variant])
     assert other.exit_code == 0, other.output
     with open_store(sqlite_url) as store, store.session() as session:
         run = session.scalars(select(EvalRun).order_by(EvalRun.id.desc())).first()
@@ -468,3 +469,4 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
         plan_run = session.get(Run, result.plan_run_id)
         assert plan_run is not None
         assert (plan_run.parameters["k"], plan_run.parameters["p_expand"]) == (2, 0.5)
+        assert plan_run.parameters["retry_weight"] == 1.0

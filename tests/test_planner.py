@@ -156,7 +156,7 @@ def test_a_resumed_run_keeps_its_options() -> None:
 # --- selection heuristics --------------------------------------------------------------------------------
 
 
-def _search_with_states(states: list[str], heuristic: str, goal: str) -> Twisted:
+def _search_with_states(states: list[str], heuristic: str, goal: str, **options: Any) -> Twisted:
     """A search whose tree holds one node per state (no simulation is needed to select)."""
     q, points, p0 = straight_rope()
     tree = SearchTree()
@@ -164,7 +164,7 @@ def _search_with_states(states: list[str], heuristic: str, goal: str) -> Twisted
         p = parse_p_data(state)
         tree.add(Node(i, None if i == 0 else 0, q, points, p, None, 0, 0))
     g = check_goal(goal)
-    options = PlannerOptions(heuristic=heuristic, seed=7)
+    options = PlannerOptions(heuristic=heuristic, seed=7, **options)
     return Twisted(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
 
 
@@ -211,6 +211,41 @@ def test_states_off_every_plan_are_not_candidates() -> None:
     wrong = '[[1,"O",2,"-"],[2,"U",1,"-"]]'
     search = _search_with_states(["[]", wrong], "crs", GOAL_3)
     assert search.candidate_states == [EMPTY.key]
+
+
+@pytest.mark.parametrize(("retry_weight", "share"), [(0.1, 0.1 / 1.1), (1.0, 0.5)])
+def test_a_node_already_asked_for_the_next_state_is_chosen_with_the_retry_weight(
+    retry_weight: float, share: float
+) -> None:
+    # two nodes in the straight state; node 0 was asked once for the 1-crossing state
+    search = _search_with_states(["[]", "[]"], "crs", ONE_CROSSING, retry_weight=retry_weight)
+    one = parse_p_data(ONE_CROSSING)
+    search.stats["pair"][f"0|{one.key}"] = [1.0, 0.0]
+    counts = Counter(search.select_configuration(EMPTY.key, one).index for _ in range(4000))
+    assert counts[0] / 4000 == pytest.approx(share, abs=0.025), counts
+    # another next state: neither node was asked for it, the choice is uniform
+    other = parse_p_data(STATES_0_1_2[2])
+    counts = Counter(search.select_configuration(EMPTY.key, other).index for _ in range(4000))
+    assert counts[0] / 4000 == pytest.approx(0.5, abs=0.025), counts
+
+
+def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path) -> None:
+    with open_store(_db(tmp_path)) as store, SimPool(1, 1.0) as pool:
+        search = start_search(store, check_goal(ONE_CROSSING), PlannerOptions(planner="random-low", seed=0), pool)
+        result = search.run(max_iterations=5)
+    pairs = result.stats["pair"]
+    steps = sum(tried for tried, _ in result.steps_by_move().values())
+    assert pairs and sum(tried for tried, _ in pairs.values()) == steps
+    assert all(key.split("|")[1] == parse_p_data(ONE_CROSSING).key for key in pairs)
+
+
+def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() -> None:
+    stored = PlannerOptions(seed=3).to_dict()
+    del stored["retry_weight"]
+    assert PlannerOptions.from_dict(stored).retry_weight == 1.0
+    assert PlannerOptions().retry_weight < 1.0
+    with pytest.raises(PlanInputError, match=r"retry_weight must lie in \(0, 1\], got 0"):
+        planner_options({"retry_weight": 0.0})
 
 
 # --- persistence: checkpoint, resume, determinism ----------------------------------------------------------

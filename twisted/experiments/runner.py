@@ -377,7 +377,7 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
 
 
 # planner options that change what a result is: results stored under one label must agree on them
-RESULT_OPTIONS = ("planner", "model_id", "heuristic", "k", "p_expand", "k_expand")
+RESULT_OPTIONS = ("planner", "model_id", "heuristic", "k", "p_expand", "k_expand", "retry_weight")
 
 
 def _check_label_options(

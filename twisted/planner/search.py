@@ -68,8 +68,9 @@ PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
 HEURISTICS = ("rnd", "crs", "ucb")
 # Tables of the search's statistics (kept in every checkpoint): [times selected, summed reward] per
 # state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
-# [simulator calls, results kept in T] per source of curves (CALL_SOURCES)
-STATS_TABLES = ("state", "plan", "move", "calls")
+# [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
+# (node index, requested next state) pair of follow_plan (read by the retry weight)
+STATS_TABLES = ("state", "plan", "move", "calls", "pair")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
@@ -85,6 +86,9 @@ class PlannerOptions:
     plan_limit: int = 100  # high-level plans kept per reached state
     seed: int = 0
     ucb_c: float = 0.7  # exploration weight of the ucb heuristic (rewards lie in [0, 1])
+    # weight of a node already asked n times for the plan's next state: retry_weight**n (1: uniform,
+    # the paper's choice)
+    retry_weight: float = 0.1
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -102,6 +106,8 @@ class PlannerOptions:
             raise ValueError(f"k_expand must be at least 1, got {self.k_expand}")
         if self.plan_limit < 1:
             raise ValueError(f"plan_limit must be at least 1, got {self.plan_limit}")
+        if not 0.0 < self.retry_weight <= 1.0:
+            raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -113,13 +119,15 @@ class PlannerOptions:
             "plan_limit": self.plan_limit,
             "seed": self.seed,
             "ucb_c": self.ucb_c,
+            "retry_weight": self.retry_weight,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
+        """The options a run stored; a run stored before ``retry_weight`` existed chose uniformly."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**known)
+        return cls(**{"retry_weight": 1.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -194,8 +202,7 @@ class CurveSampler(Protocol):
 
     def sample(
         self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
-    ) -> list[Any]:
-        ...
+    ) -> list[Any]: ...
 
 
 class RandomCurves:
@@ -212,8 +219,7 @@ class RandomCurves:
 
 
 class Pool(Protocol):
-    def run(self, jobs: Sequence[tuple[np.ndarray, Any]]) -> list[Any]:
-        ...
+    def run(self, jobs: Sequence[tuple[np.ndarray, Any]]) -> list[Any]: ...
 
 
 @dataclass
@@ -320,7 +326,7 @@ class Twisted:
             self.iteration = checkpoint.iteration
             self.elapsed_before_s = checkpoint.elapsed_s
             self.sim_calls = checkpoint.sim_calls
-            # a checkpoint written before the move and calls tables existed starts them empty
+            # a checkpoint written before a table existed starts it empty
             self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in STATS_TABLES}
 
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
@@ -371,7 +377,7 @@ class Twisted:
 
     def _save(self, upto: int, checkpoint: Checkpoint) -> None:
         if self.recorder is not None:
-            self.recorder.save(self.tree.nodes[self._saved:upto], checkpoint)
+            self.recorder.save(self.tree.nodes[self._saved : upto], checkpoint)
         self._saved = upto
         self._last_save = time.perf_counter()
 
@@ -456,7 +462,7 @@ class Twisted:
             self.random_expand()
             return
         plan_index, plan = self.select_plan(s)
-        node = self.select_configuration(s)
+        node = self.select_configuration(s, plan.states[1])
         steps_done = self.follow_plan(node, plan)
         self.learn(s, plan_index, steps_done / len(plan.moves))
         if self.goal_node is None and self.rng.random() < self.options.p_expand:
@@ -508,10 +514,22 @@ class Twisted:
                 best, best_score = index, score
         return best, plans[best]
 
-    def select_configuration(self, s: str) -> Node:
-        """A node of ``T`` in state ``s``, uniformly."""
+    def select_configuration(self, s: str, next_state: PData) -> Node:
+        """A node of ``T`` in state ``s`` to ask for ``next_state``: weight ``retry_weight ** n`` for a
+        node already asked for it ``n`` times.
+
+        A plan step succeeds or fails by its (node, next state) pair far more than by the curves
+        drawn (DESIGN 8), so among the configurations of one state the untried ones go first. While
+        every weight is equal the draw is uniform and takes the random number the paper's choice
+        takes, so ``retry_weight = 1`` replays it exactly.
+        """
         indices = self.tree.by_state[s]
-        return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
+        pairs, key = self.stats["pair"], next_state.key
+        weights = [self.options.retry_weight ** pairs.get(f"{i}|{key}", [0.0])[0] for i in indices]
+        if min(weights) == max(weights):
+            return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
+        p = np.array(weights) / sum(weights)
+        return self.tree.nodes[indices[int(self.rng.choice(len(indices), p=p))]]
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
         """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
@@ -530,6 +548,7 @@ class Twisted:
             children = self.simulate(current, curves, "follow_plan")
             hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             self._count("move", str(move.kind), 1, hit is not None)
+            self._count("pair", f"{current.index}|{next_state.key}", 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
@@ -546,7 +565,7 @@ class Twisted:
         for start in range(0, len(curves), chunk):
             if start:
                 self._check_stop(self._deadline_s)
-            self.simulate(node, curves[start:start + chunk], "random_expand")
+            self.simulate(node, curves[start : start + chunk], "random_expand")
             if self.goal_node is not None:
                 return
 
