@@ -162,8 +162,8 @@ def retry_weight_option() -> Any:
         None,
         "--retry-weight",
         callback=_check_retry_weight,
-        help="Weight per earlier try of a (node, next state) pair when choosing where to follow a plan "
-        f"(1: the paper's uniform choice; default {PlannerOptions.retry_weight}).",
+        help="Node choice: weight retry_weight**n for a node already asked n times for the plan's next "
+        f"state (1: the paper's uniform choice; default {PlannerOptions.retry_weight}).",
     )
 
 

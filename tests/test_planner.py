@@ -230,8 +230,9 @@ def test_a_node_already_asked_for_the_next_state_is_chosen_with_the_retry_weight
 
 
 def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path) -> None:
+    options = PlannerOptions(planner="random-low", seed=0)
     with open_store(_db(tmp_path)) as store, SimPool(1, 1.0) as pool:
-        search = start_search(store, check_goal(ONE_CROSSING), PlannerOptions(planner="random-low", seed=0), pool)
+        search = start_search(store, check_goal(ONE_CROSSING), options, pool)
         result = search.run(max_iterations=5)
     pairs = result.stats["pair"]
     steps = sum(tried for tried, _ in result.steps_by_move().values())
