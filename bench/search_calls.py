@@ -110,7 +110,7 @@ def main() -> None:
             if counted and total
             else f"{'-':>7} {'-':>7} {'-':>9}"
         )
-        pairs = g["pairs"] if g["counted"] == g["runs"] else None
+        pairs = g["pairs"] if counted else None
         retried = f"{pairs[1] / pairs[0]:7.0%}" if pairs and pairs[0] else f"{'-':>7}"
         moves = "  ".join(
             f"{kind} {int(reached)}/{int(tried)} ({reached / tried:.0%})"

@@ -62,6 +62,7 @@ __all__ = [
     "SearchResult",
     "SearchTree",
     "Twisted",
+    "pair_key",
 ]
 
 PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
@@ -72,6 +73,11 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # (node index, requested next state) pair of follow_plan (read by the retry weight)
 STATS_TABLES = ("state", "plan", "move", "calls", "pair")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
+
+
+def pair_key(node_index: int, next_state: PData) -> str:
+    """The key of a (node, requested next state) pair in the ``pair`` statistics table."""
+    return f"{node_index}|{next_state.key}"
 
 
 @dataclass(frozen=True)
@@ -524,8 +530,8 @@ class Twisted:
         takes, so ``retry_weight = 1`` replays it exactly.
         """
         indices = self.tree.by_state[s]
-        pairs, key = self.stats["pair"], next_state.key
-        weights = [self.options.retry_weight ** pairs.get(f"{i}|{key}", [0.0])[0] for i in indices]
+        pairs = self.stats["pair"]
+        weights = [self.options.retry_weight ** pairs.get(pair_key(i, next_state), [0.0])[0] for i in indices]
         if min(weights) == max(weights):
             return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
         p = np.array(weights) / sum(weights)
@@ -548,7 +554,7 @@ class Twisted:
             children = self.simulate(current, curves, "follow_plan")
             hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             self._count("move", str(move.kind), 1, hit is not None)
-            self._count("pair", f"{current.index}|{next_state.key}", 1, hit is not None)
+            self._count("pair", pair_key(current.index, next_state), 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
