@@ -221,7 +221,7 @@ def test_a_node_already_asked_for_the_next_state_is_chosen_with_the_retry_weight
     # two nodes in the straight state; node 0 was asked once for the 1-crossing state
     search = _search_with_states(["[]", "[]"], "crs", ONE_CROSSING, retry_weight=retry_weight)
     one = parse_p_data(ONE_CROSSING)
-    search.stats["pair"][pair_key(0, one)] = [1.0, 0.0]
+    search.stats["pair"][pair_key(0, one.key)] = [1.0, 0.0]
     counts = Counter(search.select_configuration(EMPTY.key, one).index for _ in range(4000))
     assert counts[0] / 4000 == pytest.approx(share, abs=0.025), counts
     # another next state: neither node was asked for it, the choice is uniform

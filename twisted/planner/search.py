@@ -75,9 +75,10 @@ STATS_TABLES = ("state", "plan", "move", "calls", "pair")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
-def pair_key(node_index: int, next_state: PData) -> str:
-    """The key of a (node, requested next state) pair in the ``pair`` statistics table."""
-    return f"{node_index}|{next_state.key}"
+def pair_key(node_index: int, next_state_key: str) -> str:
+    """The key of a (node, requested next state) pair in the ``pair`` statistics table; the state
+    is given by its ``PData.key`` so that a caller asking for many nodes serialises it once."""
+    return f"{node_index}|{next_state_key}"
 
 
 @dataclass(frozen=True)
@@ -531,8 +532,8 @@ class Twisted:
         takes, so ``retry_weight = 1`` replays it exactly.
         """
         indices = self.tree.by_state[s]
-        pairs = self.stats["pair"]
-        weights = [self.options.retry_weight ** pairs.get(pair_key(i, next_state), [0.0])[0] for i in indices]
+        pairs, key = self.stats["pair"], next_state.key
+        weights = [self.options.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
         if min(weights) == max(weights):
             return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
         p = np.array(weights) / sum(weights)
@@ -555,7 +556,7 @@ class Twisted:
             children = self.simulate(current, curves, "follow_plan")
             hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             self._count("move", str(move.kind), 1, hit is not None)
-            self._count("pair", pair_key(current.index, next_state), 1, hit is not None)
+            self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
