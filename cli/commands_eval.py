@@ -36,6 +36,7 @@ from cli.options import (
     ray_address_argument,
     retry_weight_option,
     seeds_option,
+    state_prior_option,
     value,
 )
 
@@ -311,11 +312,13 @@ def eval_command(
     p_expand: float | None = p_expand_option(),
     k_expand: int | None = k_expand_option(),
     retry_weight: float | None = retry_weight_option(),
+    state_prior: float | None = state_prior_option(),
     label: str = typer.Option(
         None,
         "--label",
         help="Name the results are stored under (default: planner[-heuristic]); results under one label "
-        "must share the planner, model, heuristic, --k, --p-expand, --k-expand and --retry-weight.",
+        "must share the planner, model, heuristic, --k, --p-expand, --k-expand, --retry-weight and "
+        "--state-prior.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
@@ -337,7 +340,13 @@ def eval_command(
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
     options = _planner_options(
-        heuristic, model_id, k=k, p_expand=p_expand, k_expand=k_expand, retry_weight=retry_weight
+        heuristic,
+        model_id,
+        k=k,
+        p_expand=p_expand,
+        k_expand=k_expand,
+        retry_weight=retry_weight,
+        state_prior=state_prior,
     )
     requests = [
         EvalOptions(

@@ -40,6 +40,7 @@ from cli.options import (
     p_expand_option,
     print_json,
     retry_weight_option,
+    state_prior_option,
     value,
 )
 
@@ -87,6 +88,7 @@ def plan_command(
     p_expand: float | None = p_expand_option(),
     k_expand: int | None = k_expand_option(),
     retry_weight: float | None = retry_weight_option(),
+    state_prior: float | None = state_prior_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
@@ -145,6 +147,7 @@ def plan_command(
             "p_expand": p_expand,
             "k_expand": k_expand,
             "retry_weight": retry_weight,
+            "state_prior": state_prior,
             "plan_limit": plan_limit,
             "tighten": True if tighten else None,
         },

@@ -167,6 +167,24 @@ def retry_weight_option() -> Any:
     )
 
 
+def _check_state_prior(tries: float | None) -> float | None:
+    if tries is not None and not 0.0 <= tries <= 1e6:  # NaN fails both comparisons
+        raise _bad(f"--state-prior {tries}: must be a number of tries in [0, 1e6]")
+    return tries
+
+
+def state_prior_option() -> Any:
+    """``--state-prior`` of the commands that run the planner; None: PlannerOptions.state_prior."""
+    return typer.Option(
+        None,
+        "--state-prior",
+        callback=_check_state_prior,
+        help="State choice (crs): weight (1 + Cross(s)) * r(s), r(s) how the plan steps tried from s fare "
+        "against its crossing level, shrunk by this many tries (0: the paper's crs; default "
+        f"{PlannerOptions.state_prior:g}).",
+    )
+
+
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

@@ -453,7 +453,7 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
     refused = runner.invoke(app, [*args, "--label", "x", "--k", "2"])
     assert refused.exit_code == 2, refused.output
     message = " ".join(refused.output.split())  # the console wraps long lines
-    assert "--label x:" in message and "k None (now 2)" in message
+    assert "--label x:" in message and "k 3 (now 2)" in message  # the defaults are stored as values
     with open_store(sqlite_url) as store, store.session() as session:
         assert len(list(session.scalars(select(EvalRun)))) == 1  # refused before a run was stored
     again = runner.invoke(app, [*args, "--label", "x"])  # the same options: finished results reused
@@ -470,3 +470,12 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
         assert plan_run is not None
         assert (plan_run.parameters["k"], plan_run.parameters["p_expand"]) == (2, 0.5)
         assert plan_run.parameters["retry_weight"] == 1.0
+
+    # results stored before the defaults were stored as values (the option left out) are not reused
+    # by an evaluation with today's defaults, whose values may differ from those of their day
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x")):
+            run.parameters = {k: v for k, v in run.parameters.items() if k != "state_prior"}
+    old = runner.invoke(app, [*args, "--label", "x"])
+    assert old.exit_code == 2, old.output
+    assert "state_prior unrecorded (the default of its day) (now 50.0)" in " ".join(old.output.split())

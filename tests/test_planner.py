@@ -181,6 +181,45 @@ def test_crs_weights_states_by_one_plus_crossings() -> None:
     assert np.allclose(shares, [1 / 6, 2 / 6, 3 / 6], atol=0.03), shares
 
 
+def test_the_state_prior_sinks_a_state_whose_steps_keep_failing() -> None:
+    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=20.0)
+    keys = [parse_p_data(s).key for s in STATES_0_1_2]
+    assert np.allclose(search.step_ratios(keys), 1.0), "untried states keep the crs weight"
+    # the 2-crossing state failed 60 steps: its level has no other state, so r = n0 / (t + n0)
+    search.stats["step"][keys[2]] = [60.0, 0.0]
+    assert search.step_ratios(keys)[2] == pytest.approx(20.0 / 80.0)
+    counts = Counter(search.select_topological_state() for _ in range(6000))
+    weights = np.array([1.0, 2.0, 3.0 * 0.25])
+    shares = np.array([counts[k] for k in keys]) / 6000
+    assert np.allclose(shares, weights / weights.sum(), atol=0.03), shares
+    # n0 = 0 is the paper's crs, whatever the steps did
+    paper = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=0.0)
+    paper.stats["step"] = dict(search.stats["step"])
+    plain = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=0.0)
+    assert [paper.select_topological_state() for _ in range(50)] == [
+        plain.select_topological_state() for _ in range(50)
+    ]
+
+
+def test_the_state_prior_compares_a_state_with_its_own_crossing_level() -> None:
+    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=20.0)
+    keys = [parse_p_data(s).key for s in STATES_0_1_2]
+    # the root's steps succeed half the time, the 1-crossing state's one time in ten: each is the
+    # only state of its level, so neither is judged against the other (judged against the root the
+    # second would sink to about 0.3; the level rate's +1 / +2 keeps it near, not at, 1)
+    search.stats["step"][keys[0]] = [40.0, 20.0]
+    search.stats["step"][keys[1]] = [40.0, 4.0]
+    ratios = search.step_ratios(keys)
+    assert ratios[0] == pytest.approx(1.0, abs=0.15) and ratios[1] == pytest.approx(1.0, abs=0.15)
+    # a second 1-crossing state (off every plan, but its steps count toward the level) never succeeds:
+    # against it the first one now beats its level and rises, and it sinks
+    wrong = parse_p_data('[[1,"O",2,"-"],[2,"U",1,"-"]]')
+    search.tree.add(Node(3, 0, search.tree.nodes[0].q, search.tree.nodes[0].points, wrong, None, 0, 0))
+    search.stats["step"][wrong.key] = [40.0, 0.0]
+    high, low = search.step_ratios([keys[1], wrong.key])
+    assert high > 1.3 and low < 0.5, (high, low)
+
+
 def test_rnd_is_uniform_over_states() -> None:
     search = _search_with_states(STATES_0_1_2, "rnd", GOAL_3)
     counts = Counter(search.select_topological_state() for _ in range(6000))
@@ -238,14 +277,16 @@ def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path)
     pairs = result.stats["pair"]
     steps = sum(tried for tried, _ in result.steps_by_move().values())
     assert pairs and sum(tried for tried, _ in pairs.values()) == steps
+    assert sum(tried for tried, _ in result.stats["step"].values()) == steps
     assert all(key.split("|")[1] == parse_p_data(ONE_CROSSING).key for key in pairs)
 
 
 def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() -> None:
     stored = PlannerOptions(seed=3).to_dict()
-    del stored["retry_weight"]
+    del stored["retry_weight"], stored["state_prior"]
     assert PlannerOptions.from_dict(stored).retry_weight == 1.0
-    assert PlannerOptions().retry_weight < 1.0
+    assert PlannerOptions.from_dict(stored).state_prior == 0.0
+    assert PlannerOptions().retry_weight < 1.0 and PlannerOptions().state_prior > 0.0
     with pytest.raises(PlanInputError, match=r"retry_weight must lie in \(0, 1\], got 0"):
         planner_options({"retry_weight": 0.0})
 

@@ -350,6 +350,18 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
         label = planner if options.get("heuristic") is None else f"{planner}-{options['heuristic']}"
     if not label or len(label) > 32:
         raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
+    # the defaults are stored as values: a later change of a default then starts new results instead of
+    # counting this label's old ones as done
+    from twisted.planner import PlannerOptions
+
+    for key in RESULT_OPTIONS:
+        if key not in ("planner", "model_id") and options.get(key) is None:
+            options[key] = getattr(PlannerOptions(), key)
+    fields = {k: v for k, v in options.items() if k in PlannerOptions.__dataclass_fields__}
+    try:
+        PlannerOptions(**{**fields, "planner": planner}).validate()
+    except (TypeError, ValueError) as exc:
+        raise EvalInputError(f"planner options: {exc}") from None
     if planner in ("twisted", "sac"):
         from twisted.planner import PlanInputError, curve_sampler
 
@@ -377,7 +389,21 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
 
 
 # planner options that change what a result is: results stored under one label must agree on them
-RESULT_OPTIONS = ("planner", "model_id", "heuristic", "k", "p_expand", "k_expand", "retry_weight")
+RESULT_OPTIONS = (
+    "planner",
+    "model_id",
+    "heuristic",
+    "k",
+    "p_expand",
+    "k_expand",
+    "retry_weight",
+    "state_prior",
+)
+
+
+def _shown(stored: Any) -> str:
+    """A stored planner option; evaluations before the defaults were stored left them out."""
+    return "unrecorded (the default of its day)" if stored is None else str(stored)
 
 
 def _check_label_options(
@@ -395,7 +421,9 @@ def _check_label_options(
     for (parameters,) in session.execute(q):
         theirs = {key: (parameters or {}).get(key) for key in RESULT_OPTIONS}
         differ = [
-            f"{key} {theirs[key]} (now {ours[key]})" for key in RESULT_OPTIONS if theirs[key] != ours[key]
+            f"{key} {_shown(theirs[key])} (now {ours[key]})"
+            for key in RESULT_OPTIONS
+            if theirs[key] != ours[key]
         ]
         if differ:
             raise EvalInputError(

@@ -3,15 +3,18 @@
 The search keeps a tree ``T`` of reached configurations (each with its topological state ``Top(q)``)
 and a set of high-level plans ``P`` from every reached state to the goal. Each iteration:
 
-    s = select_topological_state()          # rnd | crs (weight 1 + Cross(s)) | ucb (bandit)
+    s = select_topological_state()          # rnd | crs (weight (1 + Cross(s)) r(s)) | ucb (bandit)
     plan = select_plan(s)                   # uniform (or ucb) over the plans from s
-    q = select_configuration(s)             # uniform over the nodes of T in state s
+    q = select_configuration(s)             # a node of T in state s (retry weight)
     found = follow_plan(q, plan)            # K curves per step, continue from the first that hits
     if not found and rng.random() < p:      # completeness: random curves from a random node
         random_expand()
 
 until the goal state appears in ``T`` or the time runs out. The answer is the path of curves from
-the root of ``T`` to the goal node.
+the root of ``T`` to the goal node. Where this differs from the paper (DESIGN 8): ``r(s)``, the state
+prior, is how the plan steps started from ``s`` fared against those of its crossing level (the
+paper's crs has 1), and the node choice weights a node by how often it was already asked for the
+plan's next state (the retry weight; the paper's choice is uniform).
 
 Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
 the same high-level plans with uniformly random curves (the paper's "low+high level");
@@ -70,8 +73,9 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # Tables of the search's statistics (kept in every checkpoint): [times selected, summed reward] per
 # state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
-# (node index, requested next state) pair of follow_plan (read by the retry weight)
-STATS_TABLES = ("state", "plan", "move", "calls", "pair")
+# (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
+# steps achieved] per state a follow_plan step started from (read by the state prior)
+STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
@@ -83,8 +87,8 @@ def pair_key(node_index: int, next_state_key: str) -> str:
 
 @dataclass(frozen=True)
 class PlannerOptions:
-    """Algorithm options; the defaults are the paper's values except ``k``, ``k_expand`` and
-    ``retry_weight``, which measured searches set (DESIGN 8)."""
+    """Algorithm options; the defaults are the paper's values except ``k``, ``k_expand``,
+    ``retry_weight`` and ``state_prior``, which measured searches set (DESIGN 8)."""
 
     planner: str = "twisted"
     heuristic: str = "crs"
@@ -97,6 +101,10 @@ class PlannerOptions:
     # weight of a node already asked n times for the plan's next state: retry_weight**n (1: uniform,
     # the paper's choice)
     retry_weight: float = 0.1
+    # crs state choice learns from the plan steps tried: weight (1 + Cross(s)) * r(s), r(s) the step
+    # success of s against its crossing level, shrunk by this many tries' worth of the level's rate
+    # (0: the paper's crs, r = 1)
+    state_prior: float = 50.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -116,6 +124,8 @@ class PlannerOptions:
             raise ValueError(f"plan_limit must be at least 1, got {self.plan_limit}")
         if not 0.0 < self.retry_weight <= 1.0:
             raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
+        if not (0.0 <= self.state_prior and math.isfinite(self.state_prior)):
+            raise ValueError(f"state_prior must be a finite number of tries >= 0, got {self.state_prior}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -128,14 +138,16 @@ class PlannerOptions:
             "seed": self.seed,
             "ucb_c": self.ucb_c,
             "retry_weight": self.retry_weight,
+            "state_prior": self.state_prior,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
-        """The options a run stored; a run stored before ``retry_weight`` existed chose uniformly."""
+        """The options a run stored; a run stored before ``retry_weight`` or ``state_prior`` existed
+        chose its nodes uniformly and its states by the paper's crs."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, **known})
+        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -487,8 +499,36 @@ class Twisted:
             return candidates[int(self.rng.integers(len(candidates)))]
         if self.options.heuristic == "crs":
             weights = np.array([1.0 + self.tree.states[key].cross for key in candidates])
+            if self.options.state_prior > 0.0:
+                weights = weights * self.step_ratios(candidates)
             return candidates[int(self.rng.choice(len(candidates), p=weights / weights.sum()))]
         return self._ucb_state(candidates)
+
+    def step_ratios(self, candidates: list[str]) -> np.ndarray:
+        """``r(s)`` of the crs weight: how the plan steps started from ``s`` fare against those of its
+        crossing level, ``((h_s + n0 m) / (t_s + n0)) / m``.
+
+        ``t_s`` steps tried from ``s``, ``h_s`` achieved; ``m = (H + 1) / (T + 2)`` the rate of every
+        step from a state with as many crossings; ``n0 = state_prior``. An untried state has r = 1;
+        a state whose steps keep failing sinks as ``n0 / (t_s + n0)`` (and its level's share of the
+        choices with it, toward the levels that reach new states); one that beats its level rises.
+        """
+        steps = self.stats["step"]
+        level: dict[int, list[float]] = {}
+        for key, (tried, hit) in steps.items():
+            if key not in self.tree.states:
+                continue
+            entry = level.setdefault(self.tree.states[key].cross, [0.0, 0.0])
+            entry[0] += tried
+            entry[1] += hit
+        n0 = self.options.state_prior
+        ratios = []
+        for key in candidates:
+            tried, hit = steps.get(key, (0.0, 0.0))
+            level_tried, level_hit = level.get(self.tree.states[key].cross, (0.0, 0.0))
+            m = (level_hit + 1.0) / (level_tried + 2.0)
+            ratios.append((hit + n0 * m) / ((tried + n0) * m))
+        return np.array(ratios)
 
     def _ucb_state(self, candidates: list[str]) -> str:
         # Each state starts with one pseudo-observation worth (1 + Cross(s)) / (1 + Cross(goal)), so an
@@ -557,6 +597,7 @@ class Twisted:
             hit = next((c for c in children if c is not None and c.p_data == next_state), None)
             self._count("move", str(move.kind), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
+            self._count("step", current.p_data.key, 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
