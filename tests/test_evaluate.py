@@ -478,4 +478,4 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
             run.parameters = {k: v for k, v in run.parameters.items() if k != "state_prior"}
     old = runner.invoke(app, [*args, "--label", "x"])
     assert old.exit_code == 2, old.output
-    assert "state_prior unrecorded (the default of its day) (now 50.0)" in " ".join(old.output.split())
+    assert "state_prior unrecorded (the default of its day) (now 0.0)" in " ".join(old.output.split())

@@ -286,7 +286,7 @@ def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() ->
     del stored["retry_weight"], stored["state_prior"]
     assert PlannerOptions.from_dict(stored).retry_weight == 1.0
     assert PlannerOptions.from_dict(stored).state_prior == 0.0
-    assert PlannerOptions().retry_weight < 1.0 and PlannerOptions().state_prior > 0.0
+    assert PlannerOptions().retry_weight < 1.0 and PlannerOptions().state_prior == 0.0
     with pytest.raises(PlanInputError, match=r"retry_weight must lie in \(0, 1\], got 0"):
         planner_options({"retry_weight": 0.0})
 
