@@ -3,7 +3,7 @@
 The search keeps a tree ``T`` of reached configurations (each with its topological state ``Top(q)``)
 and a set of high-level plans ``P`` from every reached state to the goal. Each iteration:
 
-    s = select_topological_state()          # rnd | crs (weight (1 + Cross(s)) r(s)) | ucb (bandit)
+    s = select_topological_state()          # rnd | crs (weight 1 + Cross(s), opt. * r(s)) | ucb (bandit)
     plan = select_plan(s)                   # uniform (or ucb) over the plans from s
     q = select_configuration(s)             # a node of T in state s (retry weight)
     found = follow_plan(q, plan)            # K curves per step, continue from the first that hits
