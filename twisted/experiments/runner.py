@@ -352,19 +352,16 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
         raise EvalInputError(f"--label must have 1 to 32 characters, got {label!r}")
     # the defaults are stored as values: a later change of a default then starts new results instead of
     # counting this label's old ones as done
-    from twisted.planner import PlannerOptions
+    from twisted.planner import PlanInputError, PlannerOptions, curve_sampler, planner_options
 
-    for key in RESULT_OPTIONS:
-        if key not in ("planner", "model_id") and options.get(key) is None:
-            options[key] = getattr(PlannerOptions(), key)
-    fields = {k: v for k, v in options.items() if k in PlannerOptions.__dataclass_fields__}
+    asked = {k: v for k, v in options.items() if k in PlannerOptions.__dataclass_fields__}
     try:
-        PlannerOptions(**{**fields, "planner": planner}).validate()
-    except (TypeError, ValueError) as exc:
-        raise EvalInputError(f"planner options: {exc}") from None
+        resolved = planner_options({**asked, "planner": planner})
+    except PlanInputError as exc:
+        raise EvalInputError(str(exc)) from None
+    stored = [k for k in RESULT_OPTIONS if k in PlannerOptions.__dataclass_fields__ and k != "planner"]
+    options.update({k: getattr(resolved, k) for k in stored})
     if planner in ("twisted", "sac"):
-        from twisted.planner import PlanInputError, curve_sampler
-
         try:  # fail before starting any process or task when the model cannot be had
             options["model_id"] = curve_sampler(store, planner, options.get("model_id"))[1]
         except PlanInputError as exc:

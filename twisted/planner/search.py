@@ -517,8 +517,6 @@ class Twisted:
         steps = self.stats["step"]
         level: dict[int, list[float]] = {}
         for key, (tried, hit) in steps.items():
-            if key not in self.tree.states:
-                continue
             entry = level.setdefault(self.tree.states[key].cross, [0.0, 0.0])
             entry[0] += tried
             entry[1] += hit
