@@ -377,6 +377,68 @@ def report_command(
         err_console.print("no finished evaluation results yet: run `twisted eval` first")
 
 
+def _figure(x: float | None, fmt: str = ",.0f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+@app.command("compare")
+def compare_command(
+    ctx: typer.Context,
+    label_a: Annotated[str, typer.Argument(metavar="A", help="Label of the eval results to measure.")],
+    label_b: Annotated[str, typer.Argument(metavar="B", help="Label to measure it against.")],
+    sets: Annotated[list[str] | None, typer.Option("--set", help="Only these sets (repeatable).")] = None,
+    seeds: Annotated[Seeds | None, seeds_option()] = None,
+    as_json: bool = json_option("the comparisons"),
+) -> None:
+    """Compare two eval labels run by run: the same goals, seeds, timeout and friction scale."""
+    from twisted.experiments import EvalInputError
+    from twisted.experiments.compare import compare_in_store
+
+    if label_a == label_b:
+        fail(f"A and B are both {label_a!r}: give two different labels")
+    with open_db(ctx, readonly=True, needed_by=f"labels {label_a!r} and {label_b!r}") as store:
+        try:
+            comparisons = compare_in_store(store, label_a, label_b, sets=sets or None, seeds=seeds)
+        except EvalInputError as exc:
+            fail(str(exc))
+    if as_json:
+        print_json([c.to_dict() for c in comparisons])
+        return
+    for c in comparisons:
+        table = Table(
+            "", label_a, label_b, f"{label_a} / {label_b}", title=f"{c.scope}: {label_a} against {label_b}"
+        )
+        table.add_row("runs (paired by goal and seed)", str(c.a.runs), str(c.b.runs), "")
+        table.add_row("solved", str(c.a.solved), str(c.b.solved), "")
+        table.add_row(
+            "median time to solve (s)",
+            _figure(c.a.median_time_s, ".1f"),
+            _figure(c.b.median_time_s, ".1f"),
+            "",
+        )
+        table.add_row("calls to solve (mean)", _figure(c.a.calls_to_solve), _figure(c.b.calls_to_solve), "")
+        table.add_row(
+            f"calls per goal, both solved ({c.both_solved})",
+            _figure(c.calls_both_a),
+            _figure(c.calls_both_b),
+            f"{_figure(c.calls_both_ratio, '.2f')}; median per run {_figure(c.median_ratio, '.2f')}; "
+            f"fewer in {c.a_fewer}/{c.both_solved}",
+        )
+        table.add_row(
+            "all calls per solved goal",
+            _figure(c.a.all_calls_per_solved),
+            _figure(c.b.all_calls_per_solved),
+            _figure(c.all_calls_ratio, ".2f"),
+        )
+        console.print(table)
+    unpaired = comparisons[-1]
+    if unpaired.only_a or unpaired.only_b:
+        err_console.print(
+            f"not compared: {unpaired.only_a} runs only under {label_a}, "
+            f"{unpaired.only_b} only under {label_b}"
+        )
+
+
 @sensitivity_app.command("run")
 def sensitivity_run(
     ctx: typer.Context,
