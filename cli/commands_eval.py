@@ -390,7 +390,8 @@ def compare_command(
     seeds: Annotated[Seeds | None, seeds_option()] = None,
     as_json: bool = json_option("the comparisons"),
 ) -> None:
-    """Compare two eval labels run by run: the same goals, seeds, timeout and friction scale."""
+    """Compare two eval labels run by run: the same goals, seeds, timeout and friction scale (all
+    seeds and sets both ran unless --seeds / --set narrow them)."""
     from twisted.experiments import EvalInputError
     from twisted.experiments.compare import compare_in_store
 
