@@ -53,6 +53,7 @@ def _rows() -> list[ResultRow]:
         rows.append(_row(set_name, goal, seed, "A", ca, sa))
         rows.append(_row(set_name, goal, seed, "B", cb, sb))
     rows.append(_row("s4", "g9", 0, "A", 70, True))  # no partner under B: counted, not compared
+    rows.append(_row("s6", "g9", 0, "B", 70, True))  # a set only B ran
     return rows
 
 
@@ -70,6 +71,7 @@ def test_figures_per_set_and_over_all() -> None:
     assert s4.all_calls_ratio == pytest.approx((8928 / 3) / ((400 + 200 + 9000 + 600 + 28) / 3))
     assert (s5.both_solved, s5.a_fewer, s5.median_ratio) == (1, 1, 0.05)
     assert (both.a.runs, both.a.solved, both.b.solved, both.both_solved) == (5, 4, 4, 3)
+    assert (both.only_a, both.only_b) == (1, 1)
     assert both.a.all_calls == s4.a.all_calls + s5.a.all_calls
     assert json.loads(json.dumps(both.to_dict()))["a"]["all_calls_per_solved"] == both.a.all_calls / 4
 
@@ -78,7 +80,9 @@ def test_seeds_choose_the_runs() -> None:
     (s4, s5, both) = compare_labels(_rows(), "A", "B", seeds=[0])
     assert (s4.a.runs, s5.a.runs, both.a.runs, both.both_solved) == (2, 1, 3, 2)
     (only,) = compare_labels([r for r in _rows() if r.set_name == "s5"], "A", "B")
-    assert only.scope == "s5"  # one set: no "all" row
+    assert only.scope == "s5"  # one set and no other runs: no "all" row
+    s5, rest = compare_labels([r for r in _rows() if r.set_name in ("s5", "s6")], "A", "B")
+    assert (s5.scope, rest.scope, rest.only_b, rest.a.runs) == ("s5", "all", 1, 1)
 
 
 def test_refusals() -> None:

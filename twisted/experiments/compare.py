@@ -157,7 +157,8 @@ def _compare(
 def compare_labels(
     rows: Iterable[ResultRow], a: str, b: str, *, seeds: Iterable[int] | None = None
 ) -> list[Comparison]:
-    """One comparison per set both labels ran on (in the order of ``rows``), then one over all of them.
+    """One comparison per set both labels ran on (in the order of ``rows``), then one over all runs
+    (left out when there is one set and no run elsewhere).
 
     Raises :class:`EvalInputError` when a label has no finished run (among ``seeds``, if given) or
     the two share none.
@@ -189,8 +190,8 @@ def compare_labels(
         )
         for name in sets
     ]
-    if len(sets) > 1:
-        out.append(_compare("all", ra, rb, a, b))
+    if len(sets) > 1 or any(k[0] not in sets for k in (*ra, *rb)):
+        out.append(_compare("all", ra, rb, a, b))  # also where runs of other sets went unpaired
     return out
 
 
