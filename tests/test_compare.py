@@ -9,16 +9,13 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.test_evaluate import _finished_result, _two_goal_set
 from tests.test_hardening import _digest
 from twisted.experiments.compare import compare_labels
 from twisted.experiments.problems import EvalInputError
 from twisted.experiments.report import ResultRow
 from twisted.store import open_store
-from twisted.store.experiments import EvalResult, EvalRun, ProblemRecord, load_problem_set, save_problem_set
-from twisted.topology import parse_p_data
-
-ONE = parse_p_data([[1, "O", 2, "+"], [2, "U", 1, "+"]])
-ONE_UNDER = parse_p_data([[1, "U", 2, "+"], [2, "O", 1, "+"]])
+from twisted.store.experiments import EvalRun, load_problem_set
 
 # (set, goal, seed) -> calls of A and of B; None: timed out after that many calls
 RUNS: dict[tuple[str, str, int], tuple[tuple[int, bool], tuple[int, bool]]] = {
@@ -101,9 +98,8 @@ def test_refusals() -> None:
 def _store_results(url: str) -> None:
     """Set ``ones`` (two goals), labels ``new`` and ``old``, seeds 0-1."""
     with open_store(url) as store:
+        _two_goal_set(store)
         with store.session(write=True) as session:
-            problems = [ProblemRecord(None, i, p, 0, "imported") for i, p in enumerate((ONE, ONE_UNDER))]
-            save_problem_set(session, "ones", problems, source="imported")
             record = load_problem_set(session, "ones")
             calls = {"new": [(100, True), (200, True), (300, True), (50, False)], "old": [(400, True)] * 4}
             for label, outcomes in calls.items():
@@ -115,22 +111,7 @@ def _store_results(url: str) -> None:
                 session.flush()
                 pairs = [(p, seed) for p in record.problems for seed in (0, 1)]
                 for (p, seed), (n, solved) in zip(pairs, outcomes, strict=True):
-                    session.add(
-                        EvalResult(
-                            eval_run_id=run.id,
-                            set_id=record.id,
-                            problem_id=p.id,
-                            planner=label,
-                            goal_key=p.p_data.key,
-                            seed=seed,
-                            timeout_s=10.0,
-                            friction_scale=1.0,
-                            status="solved" if solved else "timeout",
-                            solved=solved,
-                            time_to_solve_s=1.0 if solved else None,
-                            sim_calls=n,
-                        )
-                    )
+                    session.add(_finished_result(run, p, label, seed, 1.0 if solved else None, n))
 
 
 def test_cli_prints_the_comparison(tmp_path: Path) -> None:

@@ -198,6 +198,33 @@ def _two_goal_set(store) -> None:
         save_problem_set(session, "ones", problems, source="imported")
 
 
+def _finished_result(
+    eval_run: EvalRun,
+    problem: ProblemRecord,
+    planner: str,
+    seed: int,
+    time_to_solve_s: float | None,
+    sim_calls: int,
+    friction_scale: float = 1.0,
+) -> EvalResult:
+    """A finished result of ``eval_run`` on ``problem``: solved when it has a time to solve."""
+    solved = time_to_solve_s is not None
+    return EvalResult(
+        eval_run_id=eval_run.id,
+        set_id=eval_run.set_id,
+        problem_id=problem.id,
+        planner=planner,
+        goal_key=problem.p_data.key,
+        seed=seed,
+        timeout_s=eval_run.timeout_s,
+        friction_scale=friction_scale,
+        status="solved" if solved else "timeout",
+        solved=solved,
+        time_to_solve_s=time_to_solve_s,
+        sim_calls=sim_calls,
+    )
+
+
 def test_interrupted_eval_resumes_without_repeating_goals(db_url: str) -> None:
     with open_store(db_url) as store:
         _two_goal_set(store)
@@ -332,22 +359,7 @@ def test_report_curves_and_table(db_url: str, tmp_path: Path) -> None:
             }
             for (planner, friction), times in outcomes.items():
                 for p, t in zip(record.problems, times, strict=True):
-                    session.add(
-                        EvalResult(
-                            eval_run_id=eval_run.id,
-                            set_id=record.id,
-                            problem_id=p.id,
-                            planner=planner,
-                            goal_key=p.p_data.key,
-                            seed=0,
-                            timeout_s=10.0,
-                            friction_scale=friction,
-                            status="solved" if t is not None else "timeout",
-                            solved=t is not None,
-                            time_to_solve_s=t,
-                            sim_calls=100,
-                        )
-                    )
+                    session.add(_finished_result(eval_run, p, planner, 0, t, 100, friction))
         files = write_report(store, tmp_path / "rep")
     text = files.markdown.read_text()
     assert "| ones | twisted | 1 | 10 | 2 | 2 | 100% | 3.0 | 100 |" in text
