@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -66,6 +67,46 @@ def test_signals_blocked_holds_signals_back_until_the_end() -> None:
             assert seen == []
         _wait_for(seen)
         assert seen == [signal.SIGTERM]
+
+
+_CHILD_MASKS = """
+import multiprocessing, signal
+from twisted import runtime
+
+def blocked(writer):
+    writer.send(signal.SIGINT in signal.pthread_sigmask(signal.SIG_BLOCK, []))
+
+if __name__ == "__main__":
+    ctx = multiprocessing.get_context("spawn")
+    reader, writer = ctx.Pipe(duplex=False)  # no semaphore: nothing has started the resource tracker
+    with runtime.signals_blocked():
+        children = [ctx.Process(target=blocked, args=(writer,)) for _ in range(2)]
+        for child in children:
+            child.start()
+    print([reader.recv() for _ in children])
+    for child in children:
+        child.join()
+"""
+
+
+def test_workers_started_under_signals_blocked_start_with_the_signals_blocked(tmp_path: Path) -> None:
+    """In a fresh interpreter the first start() starts multiprocessing's resource tracker, which
+    unblocks SIGINT/SIGTERM when it is up: before, both workers started unprotected."""
+    script = tmp_path / "masks.py"
+    script.write_text(_CHILD_MASKS)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "[True, True]"
+
+
+def test_the_simulation_imports_mujoco_without_opengl() -> None:
+    """MuJoCo's default GL (GLFW) starts a Python child at import, which a Ctrl-C in the first second
+    killed with a traceback; pictures set MUJOCO_GL in their own child interpreter."""
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    code = "import sys, twisted.sim; print('mujoco' in sys.modules, 'glfw' in sys.modules)"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ["True", "False"]
 
 
 def test_cpu_cores_is_positive() -> None:

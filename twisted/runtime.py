@@ -113,7 +113,14 @@ def signals_blocked() -> Iterator[None]:
     set its own handlers (it used to fail a collect run: "worker died (exit code -2)"); the worker
     unblocks them once it has (:func:`worker_signals`). This process gets its signals as soon as the
     block ends.
+
+    multiprocessing's resource tracker is started first: when the first ``start()`` starts it, it
+    unblocks SIGINT and SIGTERM once it is up (CPython's ``ensure_running``), and the workers started
+    after it would lose the block.
     """
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, set(SIGNALS))
     try:
         yield
