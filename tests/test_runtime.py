@@ -91,7 +91,7 @@ if __name__ == "__main__":
 
 def test_workers_started_under_signals_blocked_start_with_the_signals_blocked(tmp_path: Path) -> None:
     """In a fresh interpreter the first start() starts multiprocessing's resource tracker, which
-    unblocks SIGINT/SIGTERM when it is up: before, both workers started unprotected."""
+    unblocks SIGINT/SIGTERM when it is up: before, the workers started after it were unprotected."""
     script = tmp_path / "masks.py"
     script.write_text(_CHILD_MASKS)
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
