@@ -185,24 +185,6 @@ def state_prior_option() -> Any:
     )
 
 
-def _check_confidence_weight(weight: float | None) -> float | None:
-    if weight is not None and not 0.0 <= weight <= 10.0:  # NaN fails both comparisons
-        raise _bad(f"--confidence-weight {weight}: must lie in [0, 10]")
-    return weight
-
-
-def confidence_weight_option() -> Any:
-    """``--confidence-weight`` of the commands that run the planner; None: its PlannerOptions default."""
-    return typer.Option(
-        None,
-        "--confidence-weight",
-        callback=_check_confidence_weight,
-        help="Plan and node choice within a state: weight c**b, c the inverse model's largest link "
-        "probability for the step from that node (0: off; default "
-        f"{PlannerOptions.confidence_weight:g}).",
-    )
-
-
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

@@ -258,8 +258,8 @@ def _double(pre: Preprocessed) -> Preprocessed:
     return replace(pre, centre=pre.centre.double(), cos=pre.cos.double(), sin=pre.sin.double())
 
 
-def astuple_shallow(pre: Preprocessed | Condition) -> tuple[torch.Tensor, ...]:
-    """The tensors of ``pre`` (or a condition) in field order (dataclasses.astuple would deep-copy them)."""
+def astuple_shallow(pre: Preprocessed) -> tuple[torch.Tensor, ...]:
+    """The tensors of ``pre`` in field order (dataclasses.astuple would deep-copy them)."""
     return tuple(getattr(pre, f.name) for f in fields(pre))
 
 
@@ -369,28 +369,6 @@ class InverseModel:
         now = top(pts) if p_data is None else p_data
         logits = self.net.link_logits(preprocess(pts), self.condition(now, parse_p_data(next_p_data), move))
         return torch.softmax(logits, dim=1)[0].numpy()
-
-    @torch.no_grad()
-    def link_confidence(
-        self, points: npt.ArrayLike, requests: list[tuple[PData, PData, Move | None]]
-    ) -> np.ndarray:
-        """(B,) the largest link probability (temperature 1) for each rope ``points[b]`` (B, 22, 3) and
-        request ``(p_now, p_next, move)``: how sure the model is where to grasp for that step.
-
-        The planner's confidence weight reads it (DESIGN 8): across the (node, next state) requests
-        of one state, the steps the model is surer of succeed more often.
-        """
-        if not requests:
-            return np.zeros(0)
-        pts = np.asarray(points, dtype=np.float64)
-        if pts.ndim != 3 or len(pts) != len(requests):
-            raise ValueError(f"need one request per rope, got {len(requests)} for points {pts.shape}")
-        conds = [self.condition(now, nxt, move) for now, nxt, move in requests]
-        cond = Condition(
-            *(torch.cat(parts) for parts in zip(*(astuple_shallow(c) for c in conds), strict=True))
-        )
-        logits = self.net.link_logits(preprocess(pts), cond)
-        return torch.softmax(logits, dim=1).max(dim=1).values.numpy().astype(np.float64)
 
     def to_bytes(self) -> bytes:
         """torch.save of the weights, architecture and metadata (what the store's BLOB holds)."""

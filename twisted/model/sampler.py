@@ -40,12 +40,6 @@ class ModelCurves:
     def sample(
         self, node: RopeNode, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
     ) -> list[Any]:
-        return list(self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move))
-
-    def confidence(self, requests: list[tuple[RopeNode, PData, Any | None]]) -> np.ndarray:
-        """(B,) for each ``(node, next_state, move)``: the model's largest link probability, how sure
-        it is where to grasp for that step (the planner's ``--confidence-weight``, DESIGN 8)."""
-        if not requests:
-            return np.zeros(0)
-        points = np.stack([node.points for node, _, _ in requests])
-        return self.model.link_confidence(points, [(node.p_data, nxt, move) for node, nxt, move in requests])
+        return list(
+            self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move)
+        )

@@ -106,10 +106,6 @@ class PlannerOptions:
     # rate (0, the default: the paper's crs, r = 1; 50 saved calls on one 4-crossing set and cost
     # calls on another, DESIGN 8)
     state_prior: float = 0.0
-    # plan and node choice within the chosen state weighted by the model's confidence in the step,
-    # c ** confidence_weight, c its largest link probability for (node, next state, move); 0: off (the
-    # choice above). Only samplers with a ``confidence`` method (the inverse model) provide c (DESIGN 8)
-    confidence_weight: float = 0.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -131,8 +127,6 @@ class PlannerOptions:
             raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
         if not (0.0 <= self.state_prior and math.isfinite(self.state_prior)):
             raise ValueError(f"state_prior must be a finite number of tries >= 0, got {self.state_prior}")
-        if not (0.0 <= self.confidence_weight <= 10.0):
-            raise ValueError(f"confidence_weight must lie in [0, 10], got {self.confidence_weight}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -146,16 +140,15 @@ class PlannerOptions:
             "ucb_c": self.ucb_c,
             "retry_weight": self.retry_weight,
             "state_prior": self.state_prior,
-            "confidence_weight": self.confidence_weight,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
-        """The options a run stored; a run stored before ``retry_weight``, ``state_prior`` or
-        ``confidence_weight`` existed chose its nodes uniformly and its states by the paper's crs."""
+        """The options a run stored; a run stored before ``retry_weight`` or ``state_prior`` existed
+        chose its nodes uniformly and its states by the paper's crs."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "confidence_weight": 0.0, **known})
+        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -360,9 +353,6 @@ class Twisted:
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
         self.plans: dict[str, list[Any]] = {}
         self.goal_node: Node | None = None
-        # the sampler's confidence in a step, per requested next state and node index (a pure function
-        # of the node and the request, so it is recomputed, not stored, on resume)
-        self._confidence: dict[str, dict[int, float]] = {}
         for p_data in tree.states.values():
             self._reached(p_data)
         self.pull_tests = 0
@@ -484,9 +474,6 @@ class Twisted:
         self.iteration = self._boundary.iteration
         self.sim_calls = self._boundary.sim_calls
         self.stats = {table: {k: list(v) for k, v in e.items()} for table, e in self._boundary.stats.items()}
-        for cached in self._confidence.values():
-            for index in [index for index in cached if index >= committed]:
-                del cached[index]
 
     def twisted_iteration(self) -> None:
         """Lines 5-12 of Algorithm 1."""
@@ -496,7 +483,7 @@ class Twisted:
             self.random_expand()
             return
         plan_index, plan = self.select_plan(s)
-        node = self.select_configuration(s, plan.states[1], plan.moves[0])
+        node = self.select_configuration(s, plan.states[1])
         steps_done = self.follow_plan(node, plan)
         self.learn(s, plan_index, steps_done / len(plan.moves))
         if self.goal_node is None and self.rng.random() < self.options.p_expand:
@@ -558,22 +545,10 @@ class Twisted:
         return best
 
     def select_plan(self, s: str) -> tuple[int, Any]:
-        """A high-level plan from ``s``: uniform (rnd, crs) or upper confidence bound (ucb).
-
-        With a confidence weight (rnd, crs) a plan is drawn with the summed weight of the nodes of
-        ``s`` for its first step (:meth:`node_weights`), so that plan and node together are drawn in
-        proportion to the node's weight for the plan's first step.
-        """
+        """A high-level plan from ``s``: uniform (rnd, crs) or upper confidence bound (ucb)."""
         plans = self.plans[s]
         if self.options.heuristic != "ucb":
-            if not self.uses_confidence:
-                index = int(self.rng.integers(len(plans)))
-                return index, plans[index]
-            firsts = {plan.states[1].key: (plan.states[1], plan.moves[0]) for plan in plans}
-            self._fill_confidence(s, list(firsts.values()))
-            totals = {key: self.node_weights(s, *first).sum() for key, first in firsts.items()}
-            weights = np.array([totals[plan.states[1].key] for plan in plans])
-            index = int(self.rng.choice(len(plans), p=weights / weights.sum()))
+            index = int(self.rng.integers(len(plans)))
             return index, plans[index]
         n_state = self.stats["state"].get(s, [0.0, 0.0])[0]
         best, best_score = 0, -math.inf
@@ -586,60 +561,22 @@ class Twisted:
                 best, best_score = index, score
         return best, plans[best]
 
-    def select_configuration(self, s: str, next_state: PData, move: Any | None = None) -> Node:
-        """A node of ``T`` in state ``s`` to ask for ``next_state`` (by ``move``), drawn in proportion
-        to :meth:`node_weights`.
+    def select_configuration(self, s: str, next_state: PData) -> Node:
+        """A node of ``T`` in state ``s`` to ask for ``next_state``: weight ``retry_weight ** n`` for a
+        node already asked for it ``n`` times.
 
-        While every weight is equal the draw is uniform and takes the random number the paper's
-        choice takes, so ``retry_weight = 1`` (without a confidence weight) replays it exactly.
-        """
-        indices = self.tree.by_state[s]
-        weights = self.node_weights(s, next_state, move)
-        if weights.min() == weights.max():
-            return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
-        return self.tree.nodes[indices[int(self.rng.choice(len(indices), p=weights / weights.sum()))]]
-
-    @property
-    def uses_confidence(self) -> bool:
-        """Whether plan and node choice read the sampler's confidence (a weight > 0 and a sampler
-        that has one: the inverse model; random curves have none)."""
-        return self.options.confidence_weight > 0.0 and hasattr(self.sampler, "confidence")
-
-    def node_weights(self, s: str, next_state: PData, move: Any | None) -> np.ndarray:
-        """The weight of each node of ``s`` (``tree.by_state[s]`` order) for the step to ``next_state``.
-
-        ``retry_weight ** n`` for a node already asked for it ``n`` times: a plan step succeeds or
-        fails by its (node, next state) pair far more than by the curves drawn (DESIGN 8), so among
-        the configurations of one state the untried ones go first. With a confidence weight ``b``,
-        times ``c ** b``, ``c`` the sampler's confidence in the step from that node.
+        A plan step succeeds or fails by its (node, next state) pair far more than by the curves
+        drawn (DESIGN 8), so among the configurations of one state the untried ones go first. While
+        every weight is equal the draw is uniform and takes the random number the paper's choice
+        takes, so ``retry_weight = 1`` replays it exactly.
         """
         indices = self.tree.by_state[s]
         pairs, key = self.stats["pair"], next_state.key
-        weights = np.array(
-            [self.options.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
-        )
-        if self.uses_confidence:
-            self._fill_confidence(s, [(next_state, move)])
-            cached = self._confidence[key]
-            confidence = np.array([cached[i] for i in indices])
-            weights = weights * confidence**self.options.confidence_weight
-        return weights
-
-    def _fill_confidence(self, s: str, requests: list[tuple[PData, Any | None]]) -> None:
-        """Ask the sampler, in one batch, for its confidence in every (node of ``s``, request) pair
-        not yet cached."""
-        missing: list[tuple[Node, PData, Any | None]] = []
-        for next_state, move in requests:
-            cached = self._confidence.setdefault(next_state.key, {})
-            missing += [
-                (self.tree.nodes[i], next_state, move) for i in self.tree.by_state[s] if i not in cached
-            ]
-        if not missing:
-            return
-        values = self.sampler.confidence(missing)  # type: ignore[attr-defined]
-        for (node, next_state, _), value in zip(missing, values, strict=True):
-            # the smallest link probability is 1/21; the floor keeps c ** b > 0 for any weight allowed
-            self._confidence[next_state.key][node.index] = max(float(value), 1e-3)
+        weights = [self.options.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
+        if min(weights) == max(weights):
+            return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
+        p = np.array(weights) / sum(weights)
+        return self.tree.nodes[indices[int(self.rng.choice(len(indices), p=p))]]
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
         """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
