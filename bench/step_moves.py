@@ -1,0 +1,119 @@
+"""Which plan steps succeed: follow_plan steps per crossing level and kind of move, from eval runs.
+
+    python bench/step_moves.py --db sqlite:///collect.db --set v26-4 --label z-now [--level 3] [--detail]
+
+For every finished evaluation result it reads the plan run's ``pair`` statistics (per node and
+requested next state: the steps tried and those that reached it, DESIGN 8) and the tree's nodes, and
+names each request by the move that makes it (``twisted.moves.explains``, the move the plan named).
+Steps are grouped by the crossings of the state they start from and by a class of move that means the
+same in every state: R1 on an end segment or an inner one, Cross of a tip over the other end segment
+or over an inner one, R2. ``--detail`` groups by the move itself instead (segment numbers are those of
+the state the move starts from, so one move there can name different physical acts in two states).
+Prints steps tried, steps that reached their state, the distinct (node, next state) pairs, goals and
+runs per group; --json writes the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from typing import Any
+
+from sqlalchemy import select
+
+from twisted.moves import Move, explains
+from twisted.store import open_store
+from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
+from twisted.store.search import load_run
+from twisted.topology import PData, parse_p_data
+
+
+def move_class(move: Move, p_data: PData) -> str:
+    """The kind of ``move`` from ``p_data`` in words that mean the same in every state."""
+    last = 2 * p_data.cross
+
+    def where(segment: int | None) -> str:
+        return "end" if segment in (0, last) else "inner"
+
+    if move.kind == "Cross":
+        return f"Cross tip over {'other end' if move.other_segment in (0, last) else 'inner'} segment"
+    if move.kind == "R1":
+        return f"R1 on {where(move.segment)} segment"
+    return "R2"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--db", required=True, help="store with evaluation results")
+    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
+    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    ap.add_argument("--level", type=int, action="append", help="only steps from states of N crossings")
+    ap.add_argument("--detail", action="store_true", help="group by the move itself, not its class")
+    ap.add_argument("--json", help="write the figures to this file")
+    args = ap.parse_args()
+
+    groups: dict[tuple[int, str], dict[str, Any]] = defaultdict(
+        lambda: {"steps": 0.0, "reached": 0.0, "pairs": 0, "goals": set(), "runs": set()}
+    )
+    with open_store(args.db) as store:
+        with store.session() as session:
+            q = (
+                select(EvalResult.plan_run_id, EvalResult.goal_key)
+                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
+                .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
+            )
+            if args.sets:
+                q = q.where(ProblemSet.name.in_(args.sets))
+            if args.labels:
+                q = q.where(EvalResult.planner.in_(args.labels))
+            rows = session.execute(q).all()
+        for run_id, goal_key in rows:
+            info = load_run(store, run_id)
+            if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
+                continue  # a run made before the pair statistics were kept
+            nodes = {node.seq: node for node in info.nodes}
+            for key, (tried, reached) in info.checkpoint.stats["pair"].items():
+                seq, next_key = key.split("|", 1)
+                node = nodes[int(seq)]
+                level = node.p_data.cross
+                if args.level and level not in args.level:
+                    continue
+                move = explains(node.p_data, parse_p_data(json.loads(next_key)))
+                if move is None:
+                    continue
+                name = str(move) if args.detail else move_class(move, node.p_data)
+                g = groups[(level, name)]
+                g["steps"] += tried
+                g["reached"] += reached
+                g["pairs"] += 1
+                g["goals"].add(goal_key)
+                g["runs"].add(run_id)
+
+    print(f"{'from':>4} {'move':60} {'steps':>7} {'reached':>8} {'rate':>6}", end="")
+    print(f" {'pairs':>6} {'goals':>5} {'runs':>5}")
+    figures = []
+    for (level, name), g in sorted(groups.items(), key=lambda item: (item[0][0], -item[1]["steps"])):
+        rate = g["reached"] / g["steps"] if g["steps"] else 0.0
+        print(
+            f"{level:>4} {name:60} {int(g['steps']):>7,} {int(g['reached']):>8,} {rate:>6.1%} "
+            f"{g['pairs']:>6,} {len(g['goals']):>5} {len(g['runs']):>5}"
+        )
+        figures.append(
+            {
+                "level": level,
+                "move": name,
+                "steps": g["steps"],
+                "reached": g["reached"],
+                "pairs": g["pairs"],
+                "goals": len(g["goals"]),
+                "runs": len(g["runs"]),
+            }
+        )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(figures, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
