@@ -31,15 +31,11 @@ from twisted.topology import PData, parse_p_data
 
 def move_class(move: Move, p_data: PData) -> str:
     """The kind of ``move`` from ``p_data`` in words that mean the same in every state."""
-    last = 2 * p_data.cross
-
-    def where(segment: int | None) -> str:
-        return "end" if segment in (0, last) else "inner"
-
+    ends = (0, 2 * p_data.cross)
     if move.kind == "Cross":
-        return f"Cross tip over {'other end' if move.other_segment in (0, last) else 'inner'} segment"
+        return f"Cross tip over {'other end' if move.other_segment in ends else 'inner'} segment"
     if move.kind == "R1":
-        return f"R1 on {where(move.segment)} segment"
+        return f"R1 on {'end' if move.segment in ends else 'inner'} segment"
     return "R2"
 
 
