@@ -395,6 +395,7 @@ RESULT_OPTIONS = (
     "k_expand",
     "retry_weight",
     "state_prior",
+    "move_prior",
 )
 
 
