@@ -6,10 +6,9 @@ For every finished evaluation result it reads the plan run's ``pair`` statistics
 requested next state: the steps tried and those that reached it, DESIGN 8) and the tree's nodes, and
 names each request by the move that makes it (``twisted.moves.explains``, the move the plan named).
 Steps are grouped by the crossings of the state they start from and by a class of move that means the
-same in every state (``twisted.moves.move_class``, the classes of the move prior): R1 on an end segment
-or an inner one, Cross of a tip over the other end segment or over an inner one, R2. ``--detail``
-groups by the move itself instead (segment numbers are those of the state the move starts from, so
-one move there can name different physical acts in two states).
+same in every state: R1 on an end segment or an inner one, Cross of a tip over the other end segment
+or over an inner one, R2. ``--detail`` groups by the move itself instead (segment numbers are those of
+the state the move starts from, so one move there can name different physical acts in two states).
 Prints steps tried, steps that reached their state, the distinct (node, next state) pairs, goals and
 runs per group; --json writes the figures.
 """
@@ -23,11 +22,21 @@ from typing import Any
 
 from sqlalchemy import select
 
-from twisted.moves import explains, move_class
+from twisted.moves import Move, explains
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import load_run
-from twisted.topology import parse_p_data
+from twisted.topology import PData, parse_p_data
+
+
+def move_class(move: Move, p_data: PData) -> str:
+    """The kind of ``move`` from ``p_data`` in words that mean the same in every state."""
+    ends = (0, 2 * p_data.cross)
+    if move.kind == "Cross":
+        return f"Cross tip over {'other end' if move.other_segment in ends else 'inner'} segment"
+    if move.kind == "R1":
+        return f"R1 on {'end' if move.segment in ends else 'inner'} segment"
+    return "R2"
 
 
 def main() -> None:

@@ -31,7 +31,6 @@ from cli.options import (
     json_option,
     k_expand_option,
     k_option,
-    move_prior_option,
     p_expand_option,
     print_json,
     ray_address_argument,
@@ -314,13 +313,12 @@ def eval_command(
     k_expand: int | None = k_expand_option(),
     retry_weight: float | None = retry_weight_option(),
     state_prior: float | None = state_prior_option(),
-    move_prior: float | None = move_prior_option(),
     label: str = typer.Option(
         None,
         "--label",
         help="Name the results are stored under (default: planner[-heuristic]); results under one label "
-        "must share the planner, model, heuristic, --k, --p-expand, --k-expand, --retry-weight, "
-        "--state-prior and --move-prior.",
+        "must share the planner, model, heuristic, --k, --p-expand, --k-expand, --retry-weight and "
+        "--state-prior.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
@@ -349,7 +347,6 @@ def eval_command(
         k_expand=k_expand,
         retry_weight=retry_weight,
         state_prior=state_prior,
-        move_prior=move_prior,
     )
     requests = [
         EvalOptions(

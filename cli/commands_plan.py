@@ -37,7 +37,6 @@ from cli.options import (
     json_option,
     k_expand_option,
     k_option,
-    move_prior_option,
     p_expand_option,
     print_json,
     retry_weight_option,
@@ -90,7 +89,6 @@ def plan_command(
     k_expand: int | None = k_expand_option(),
     retry_weight: float | None = retry_weight_option(),
     state_prior: float | None = state_prior_option(),
-    move_prior: float | None = move_prior_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
@@ -150,7 +148,6 @@ def plan_command(
             "k_expand": k_expand,
             "retry_weight": retry_weight,
             "state_prior": state_prior,
-            "move_prior": move_prior,
             "plan_limit": plan_limit,
             "tighten": True if tighten else None,
         },

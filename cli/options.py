@@ -185,25 +185,6 @@ def state_prior_option() -> Any:
     )
 
 
-def _check_move_prior(power: float | None) -> float | None:
-    if power is not None and not 0.0 <= power <= 100.0:  # NaN fails both comparisons
-        raise _bad(f"--move-prior {power}: must be a power in [0, 100]")
-    return power
-
-
-def move_prior_option() -> Any:
-    """``--move-prior`` of the commands that run the planner; None: PlannerOptions.move_prior."""
-    return typer.Option(
-        None,
-        "--move-prior",
-        callback=_check_move_prior,
-        help="Plan choice: weight each plan by its estimated success to this power, the product of its "
-        "steps' success by move class and crossings, learned from the stored searches of other goals "
-        "(same planner and model) and this one; crs states by their plans' estimate against their "
-        f"level's (0: uniform plans, the paper's; default {PlannerOptions.move_prior:g}).",
-    )
-
-
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

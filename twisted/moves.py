@@ -62,14 +62,11 @@ from twisted.topology import EMPTY, PData, PDataError, Visit, parse_p_data
 __all__ = [
     "DEFAULT_PLAN_LIMIT",
     "MOVES_VERSION",
-    "MOVE_CLASSES",
     "Move",
     "Plan",
     "Successor",
     "enumerate_states",
     "explains",
-    "move_class",
-    "move_key",
     "parse_state",
     "plans",
     "plans_to_any",
@@ -131,31 +128,6 @@ class Move:
     def __str__(self) -> str:
         args = ", ".join(f"{k}={v}" for k, v in self.to_dict().items() if k != "kind")
         return f"{self.kind}({args})"
-
-
-# The kinds of move that mean the same in every state (move_class): a curl on an end segment or an
-# inner one, the tip laid across the other end segment or an inner one, R2.
-MOVE_CLASSES = ("R1 end", "R1 inner", "Cross end", "Cross inner", "R2")
-
-
-def move_class(move: Move, start: PData) -> str:
-    """The kind of ``move`` from ``start`` in words that mean the same in every state (MOVE_CLASSES).
-
-    Segment numbers are those of ``start``: 0 and ``2 * start.cross`` are the end segments. For Cross,
-    ``segment`` is always the tip's end segment, so the class says what the tip is laid across.
-    """
-    ends = (0, 2 * start.cross)
-    if move.kind == "Cross":
-        return "Cross end" if move.other_segment in ends else "Cross inner"
-    if move.kind == "R1":
-        return "R1 end" if move.segment in ends else "R1 inner"
-    return "R2"
-
-
-def move_key(move: Move, start: PData) -> str:
-    """A plan step's move class with the crossings of the state it starts from, e.g. ``"2|Cross end"``:
-    the key of the planner's ``moves`` statistics (the move prior, DESIGN 8)."""
-    return f"{start.cross}|{move_class(move, start)}"
 
 
 @dataclass(frozen=True, slots=True)

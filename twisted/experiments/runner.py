@@ -395,7 +395,6 @@ RESULT_OPTIONS = (
     "k_expand",
     "retry_weight",
     "state_prior",
-    "move_prior",
 )
 
 

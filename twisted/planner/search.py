@@ -41,14 +41,13 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
 from twisted.goals import Goal, state_goal
-from twisted.moves import move_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
@@ -75,16 +74,8 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
-# steps achieved] per state a follow_plan step started from (read by the state prior); [steps tried,
-# steps achieved] per "crossings|move class" of follow_plan (move_key; read by the move prior, and by
-# later runs' move priors); the same counts from earlier searches of other goals, fixed when the run
-# starts (the move prior's "prior" table, empty unless move_prior > 0)
-STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "move_class", "prior")
-# the move prior (Twisted.move_rates): pseudo-steps at its crossing level's rate that the estimate of a
-# move class from earlier searches starts from, and the number of the run's own steps of the class that
-# this estimate is worth
-MOVE_PRIOR_TRIES = 20.0
-RUN_PRIOR_TRIES = 30.0
+# steps achieved] per state a follow_plan step started from (read by the state prior)
+STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
@@ -115,11 +106,6 @@ class PlannerOptions:
     # rate (0, the default: the paper's crs, r = 1; 50 saved calls on one 4-crossing set and cost
     # calls on another, DESIGN 8)
     state_prior: float = 0.0
-    # opt-in: plans weighted by 1 / (expected tries to carry them through), from the step success of each
-    # step's move class at its crossing level (earlier searches of other goals, then this one), to this
-    # power; crs states by (1 + Cross(s)) times their plans' weight against their level's
-    # (0, the default: uniform plans and the paper's crs; DESIGN 8)
-    move_prior: float = 0.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -141,8 +127,6 @@ class PlannerOptions:
             raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
         if not (0.0 <= self.state_prior and math.isfinite(self.state_prior)):
             raise ValueError(f"state_prior must be a finite number of tries >= 0, got {self.state_prior}")
-        if not (0.0 <= self.move_prior <= 100.0):  # NaN fails too
-            raise ValueError(f"move_prior must be a power in [0, 100], got {self.move_prior}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -156,17 +140,15 @@ class PlannerOptions:
             "ucb_c": self.ucb_c,
             "retry_weight": self.retry_weight,
             "state_prior": self.state_prior,
-            "move_prior": self.move_prior,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
-        """The options a run stored; a run stored before ``retry_weight``, ``state_prior`` or
-        ``move_prior`` existed chose its nodes uniformly, its states by the paper's crs and its plans
-        uniformly."""
+        """The options a run stored; a run stored before ``retry_weight`` or ``state_prior`` existed
+        chose its nodes uniformly and its states by the paper's crs."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "move_prior": 0.0, **known})
+        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -338,10 +320,7 @@ class Twisted:
         stop: StopSignals | None = None,
         checkpoint_every_s: float = 2.0,
         progress: Callable[[Twisted], None] | None = None,
-        move_counts: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
-        """``move_counts``: a new run's move prior, [steps tried, achieved] per ``move_key`` from earlier
-        searches (kept in the checkpoint's ``prior`` table, so a resumed run reads it from there)."""
         options.validate()
         if len(tree) == 0:
             raise ValueError("the tree needs its root (the initial configuration)")
@@ -370,15 +349,9 @@ class Twisted:
             self.sim_calls = checkpoint.sim_calls
             # a checkpoint written before a table existed starts it empty
             self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in STATS_TABLES}
-        elif move_counts is not None:
-            self.stats["prior"] = {key: [float(t), float(h)] for key, (t, h) in move_counts.items()}
 
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
         self.plans: dict[str, list[Any]] = {}
-        # per state with plans, the move classes of each plan's steps (move prior only): an index array
-        # (plans x longest plan) into _class_keys, -1 past a plan's end
-        self._plan_classes: dict[str, np.ndarray] = {}
-        self._class_keys: dict[str, int] = {}
         self.goal_node: Node | None = None
         for p_data in tree.states.values():
             self._reached(p_data)
@@ -497,7 +470,6 @@ class Twisted:
         self.tree.truncate(committed)
         for key in [key for key in self.plans if key not in self.tree.states]:
             del self.plans[key]
-            self._plan_classes.pop(key, None)
         self.rng.bit_generator.state = self._boundary.rng_state
         self.iteration = self._boundary.iteration
         self.sim_calls = self._boundary.sim_calls
@@ -530,8 +502,6 @@ class Twisted:
             weights = np.array([1.0 + self.tree.states[key].cross for key in candidates])
             if self.options.state_prior > 0.0:
                 weights = weights * self.step_ratios(candidates)
-            if self.options.move_prior > 0.0:
-                weights = weights * self.plan_ratios(candidates)
             return candidates[int(self.rng.choice(len(candidates), p=weights / weights.sum()))]
         return self._ucb_state(candidates)
 
@@ -559,62 +529,6 @@ class Twisted:
             ratios.append((hit + n0 * m) / ((tried + n0) * m))
         return np.array(ratios)
 
-    def move_rates(self) -> np.ndarray:
-        """The move prior's step success per move class (by ``_class_keys`` index).
-
-        From the earlier searches (the ``prior`` table) ``p = (h + n0 m) / (t + n0)``, with ``m = (H + 1)
-        / (T + 2)`` the rate of every step from the class's crossing level (earlier searches and this
-        one) and ``n0 = MOVE_PRIOR_TRIES``; then this run's own steps of the class (``move_class``) against
-        ``p`` worth ``RUN_PRIOR_TRIES`` of them: ``(h' + N p) / (t' + N)``. Other goals' steps say which
-        classes tend to succeed, and the run's own say how they fare for its goal: a class that keeps
-        failing here sinks within some tens of steps whatever it did elsewhere.
-        """
-        prior, own = self.stats["prior"], self.stats["move_class"]
-        level: dict[str, list[float]] = {}
-        for table in (prior, own):
-            for key, (tried, hit) in table.items():
-                entry = level.setdefault(key.split("|", 1)[0], [0.0, 0.0])
-                entry[0] += tried
-                entry[1] += hit
-        rates = np.empty(len(self._class_keys))
-        for key, index in self._class_keys.items():
-            level_tried, level_hit = level.get(key.split("|", 1)[0], (0.0, 0.0))
-            m = (level_hit + 1.0) / (level_tried + 2.0)
-            tried, hit = prior.get(key, (0.0, 0.0))
-            p = (hit + MOVE_PRIOR_TRIES * m) / (tried + MOVE_PRIOR_TRIES)
-            tried, hit = own.get(key, (0.0, 0.0))
-            rates[index] = (hit + RUN_PRIOR_TRIES * p) / (tried + RUN_PRIOR_TRIES)
-        return rates
-
-    def plan_weights(self, s: str, rates: np.ndarray | None = None) -> np.ndarray:
-        """The move prior's weight of each plan from ``s``: ``(1 / sum_i 1 / r_i) ** move_prior``, ``r_i``
-        the rate of its i-th step's class.
-
-        ``sum_i 1 / r_i`` is the number of tries the plan is expected to take when every step that
-        succeeds is kept (it is: the node it reached is in ``T``), so the weight does not favour short
-        plans for being short, as the plan's all-or-nothing success ``prod_i r_i`` would.
-        """
-        rates = self.move_rates() if rates is None else rates
-        inverse = np.append(1.0 / rates, 0.0)  # index -1: past the plan's end
-        return (1.0 / inverse[self._plan_classes[s]].sum(axis=1)) ** self.options.move_prior
-
-    def plan_ratios(self, candidates: list[str]) -> np.ndarray:
-        """The move prior's factor of the crs weight: ``E(s)``, the mean weight of a plan drawn from ``s``
-        by the weights (sum w^2 / sum w), against the mean of ``E`` over the candidate states with as
-        many crossings. The crossing levels keep the paper's shares; within a level, the states whose
-        plans use the move classes that succeed more often are chosen more often."""
-        rates = self.move_rates()
-        expected = []
-        for key in candidates:
-            w = self.plan_weights(key, rates)
-            expected.append(float((w * w).sum() / w.sum()))
-        level: dict[int, list[float]] = {}
-        for key, e in zip(candidates, expected, strict=True):
-            level.setdefault(self.tree.states[key].cross, []).append(e)
-        means = {cross: sum(values) / len(values) for cross, values in level.items()}
-        pairs = zip(candidates, expected, strict=True)
-        return np.array([e / means[self.tree.states[key].cross] for key, e in pairs])
-
     def _ucb_state(self, candidates: list[str]) -> str:
         # Each state starts with one pseudo-observation worth (1 + Cross(s)) / (1 + Cross(goal)), so an
         # untried state is preferred by depth as in crs instead of forcing a round over every state.
@@ -634,11 +548,7 @@ class Twisted:
         """A high-level plan from ``s``: uniform (rnd, crs) or upper confidence bound (ucb)."""
         plans = self.plans[s]
         if self.options.heuristic != "ucb":
-            if self.options.move_prior > 0.0:
-                w = self.plan_weights(s)
-                index = int(self.rng.choice(len(plans), p=w / w.sum()))
-            else:
-                index = int(self.rng.integers(len(plans)))
+            index = int(self.rng.integers(len(plans)))
             return index, plans[index]
         n_state = self.stats["state"].get(s, [0.0, 0.0])[0]
         best, best_score = 0, -math.inf
@@ -687,7 +597,6 @@ class Twisted:
             self._count("move", str(move.kind), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
             self._count("step", current.p_data.key, 1, hit is not None)
-            self._count("move_class", move_key(move, current.p_data), 1, hit is not None)
             if self.goal_node is not None:
                 return len(plan.moves)
             if hit is None:
@@ -790,15 +699,3 @@ class Twisted:
             self.plans[p_data.key] = []
             return
         self.plans[p_data.key] = list(self.high_level(p_data))[: self.options.plan_limit]
-        if self.options.move_prior > 0.0 and self.plans[p_data.key]:
-            self._plan_classes[p_data.key] = self._classes_of(self.plans[p_data.key])
-
-    def _classes_of(self, plans: list[Any]) -> np.ndarray:
-        """The move-class index array of ``plans`` (``_plan_classes``)."""
-        longest = max(len(plan.moves) for plan in plans)
-        out = np.full((len(plans), longest), -1, dtype=np.intp)
-        for row, plan in enumerate(plans):
-            for column, (start, move) in enumerate(zip(plan.states, plan.moves, strict=False)):
-                key = move_key(move, start)
-                out[row, column] = self._class_keys.setdefault(key, len(self._class_keys))
-        return out

@@ -326,16 +326,8 @@ def start_search(
     tree = SearchTree()
     tree.add(root)
     rng = np.random.default_rng(options.seed)
+    first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
     parameters = {**options.to_dict(), **(extra_parameters or {})}
-    prior: dict[str, list[float]] | None = None
-    if options.move_prior > 0.0:
-        from twisted.store.search import move_counts
-
-        prior, runs = move_counts(store, goal, options.planner, parameters.get("model_id"))
-        steps = sum(tried for tried, _ in prior.values())
-        log.info("move prior: %d plan steps from %d earlier searches of other goals", steps, runs)
-    tables: dict[str, Any] = {"state": {}, "plan": {}, "prior": prior or {}}
-    first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), tables)
     recorder = _Logged(SearchRun.create(store, goal, parameters, root, first, start_configuration_id))
     start = "straight rope" if start_configuration_id is None else f"configuration {start_configuration_id}"
     _log_start(f"new search from the {start}", recorder.run_id, goal, options, parameters.get("model_id"))
@@ -350,7 +342,6 @@ def start_search(
         run_id=recorder.run_id,
         stop=stop,
         progress=progress,
-        move_counts=prior,
     )
 
 

@@ -69,7 +69,6 @@ __all__ = [
     "StoredNode",
     "find_resumable_run",
     "load_run",
-    "move_counts",
     "solution_path",
     "take_lease",
 ]
@@ -600,63 +599,3 @@ def solution_path(store: Any, run_id: int) -> list[StoredNode]:
         # parent_seq above only resolves parents seen earlier in this partial load, which holds here:
         # the path is loaded in seq order and every parent precedes its child
         return nodes
-
-
-def move_counts(store: Any, goal: Goal, planner: str, model_id: Any) -> tuple[dict[str, list[float]], int]:
-    """The move prior of a new search for ``goal`` (DESIGN 8): [steps tried, achieved] per move key
-    (``twisted.moves.move_key``) summed over the stored searches of other goals by the same planner and
-    model, and how many searches that is.
-
-    A run stored before its checkpoint kept the ``move_class`` table has its counts rebuilt from the ``pair``
-    table (per node and requested next state) and the nodes' states. Runs of the same goal are left out,
-    so a search never learns from an earlier attempt at its own goal.
-    """
-    from twisted.moves import explains, move_key
-
-    counts: dict[str, list[float]] = {}
-    runs = 0
-    with store.session() as session:
-        query = (
-            select(SearchRunRow.run_id, TopologicalState.key, Run.parameters, SearchCheckpoint.stats)
-            .join(Run, Run.id == SearchRunRow.run_id)
-            .join(SearchCheckpoint, SearchCheckpoint.run_id == SearchRunRow.run_id)
-            .join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id)
-            .where(SearchRunRow.planner == planner)
-            .order_by(SearchRunRow.run_id)
-        )
-        for run_id, goal_key, parameters, stats in session.execute(query):
-            parameters, stats = parameters or {}, stats or {}
-            if parameters.get("goal_spec", goal_key) == goal.spec or parameters.get("model_id") != model_id:
-                continue
-            table = stats.get("move_class")
-            if table is None:
-                table = {}
-                pairs = stats.get("pair", {})
-                node_states = dict(
-                    session.execute(
-                        select(SearchNode.seq, TopologicalState.key)
-                        .join(TopologicalState, TopologicalState.id == SearchNode.state_id)
-                        .where(SearchNode.run_id == run_id)
-                    ).all()
-                )
-                parsed: dict[str, PData] = {}
-                for key, (tried, hit) in pairs.items():
-                    seq, next_key = key.split("|", 1)
-                    start_key = node_states.get(int(seq))
-                    if start_key is None:
-                        continue
-                    start = parsed.setdefault(start_key, parse_p_data(start_key))
-                    move = explains(start, parse_p_data(next_key))
-                    if move is None:
-                        continue
-                    entry = table.setdefault(move_key(move, start), [0.0, 0.0])
-                    entry[0] += tried
-                    entry[1] += hit
-            if not table:
-                continue
-            runs += 1
-            for key, (tried, hit) in table.items():
-                entry = counts.setdefault(key, [0.0, 0.0])
-                entry[0] += float(tried)
-                entry[1] += float(hit)
-    return counts, runs
