@@ -381,6 +381,10 @@ def _figure(x: float | None, fmt: str = ",.0f") -> str:
     return "-" if x is None else format(x, fmt)
 
 
+def _interval(interval: tuple[float, float] | None) -> str:
+    return "" if interval is None else f" [{interval[0]:.2f}, {interval[1]:.2f}]"
+
+
 @app.command("compare")
 def compare_command(
     ctx: typer.Context,
@@ -422,16 +426,18 @@ def compare_command(
             f"calls per goal, both solved ({c.both_solved})",
             _figure(c.calls_both_a),
             _figure(c.calls_both_b),
-            f"{_figure(c.calls_both_ratio, '.2f')}; median per run {_figure(c.median_ratio, '.2f')}; "
-            f"fewer in {c.a_fewer}/{c.both_solved}",
+            f"{_figure(c.calls_both_ratio, '.2f')}{_interval(c.calls_both_interval)}; "
+            f"median per run {_figure(c.median_ratio, '.2f')}; fewer in {c.a_fewer}/{c.both_solved}",
         )
         table.add_row(
             "all calls per solved goal",
             _figure(c.a.all_calls_per_solved),
             _figure(c.b.all_calls_per_solved),
-            _figure(c.all_calls_ratio, ".2f"),
+            _figure(c.all_calls_ratio, ".2f") + _interval(c.all_calls_interval),
         )
         console.print(table)
+    if any(c.calls_both_interval or c.all_calls_interval for c in comparisons):
+        console.print("(in brackets: 95 % interval of the ratio, goals resampled with all their runs)")
     unpaired = comparisons[-1]
     if unpaired.only_a or unpaired.only_b:
         err_console.print(

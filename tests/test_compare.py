@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from tests.test_evaluate import _finished_result, _two_goal_set
 from tests.test_hardening import _digest
-from twisted.experiments.compare import compare_labels
+from twisted.experiments.compare import compare_labels, pair_runs, ratio_intervals
 from twisted.experiments.problems import EvalInputError
 from twisted.experiments.report import ResultRow
 from twisted.store import open_store
@@ -71,6 +71,35 @@ def test_figures_per_set_and_over_all() -> None:
     assert (both.only_a, both.only_b) == (1, 1)
     assert both.a.all_calls == s4.a.all_calls + s5.a.all_calls
     assert json.loads(json.dumps(both.to_dict()))["a"]["all_calls_per_solved"] == both.a.all_calls / 4
+
+
+def test_the_intervals_resample_whole_goals() -> None:
+    s4, s5, both = compare_labels(_rows(), "A", "B")
+    assert s5.calls_both_interval is None and s5.all_calls_interval is None, "one goal: no interval"
+    for c in (s4, both):
+        assert c.calls_both_interval is not None and c.all_calls_interval is not None
+        for (low, high), ratio in (
+            (c.calls_both_interval, c.calls_both_ratio),
+            (c.all_calls_interval, c.all_calls_ratio),
+        ):
+            assert ratio is not None and low <= ratio <= high
+    # s4: g1's two runs both solved (A 400 calls, B 600), g2 has none both solved; a draw of g2 alone
+    # leaves the ratio undefined, every other draw gives 400 / 600
+    assert s4.calls_both_interval == pytest.approx((2 / 3, 2 / 3))
+    # the draws come from a seeded generator: the same interval at every call
+    ra, rb = pair_runs(_rows(), "A", "B")
+    assert ratio_intervals(ra, rb) == ratio_intervals(ra, rb)
+    # goals whose ratios agree give an interval of that ratio alone
+    rows = [
+        _row("s", g, seed, label, calls * (2 if label == "B" else 1), True)
+        for g, calls in (("g1", 100), ("g2", 1000))
+        for seed in (0, 1)
+        for label in ("A", "B")
+    ]
+    ra, rb = pair_runs(rows, "A", "B")
+    both, _ = ratio_intervals(ra, rb)
+    assert both == pytest.approx((0.5, 0.5))
+    assert json.loads(json.dumps(s4.to_dict()))["calls_both_interval"] == pytest.approx([2 / 3, 2 / 3])
 
 
 def test_seeds_choose_the_runs() -> None:

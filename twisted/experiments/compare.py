@@ -8,6 +8,12 @@ node, the planner's own count where the run kept no tree) and every call of ever
 timeout of the unsolved runs included. Between the labels: the calls per goal on the runs both
 solved, the median of the per-run ratios A / B there, how often A took fewer, and the ratio of all
 calls per solved goal, the figure that charges a label for the runs it did not solve.
+
+Both ratios come with a 95 % interval from a bootstrap over goals (:func:`ratio_intervals`): the
+runs of one goal under different seeds share the goal's difficulty, so whole goals, with all their
+paired runs, are drawn with replacement (``BOOTSTRAP_DRAWS`` times, from a generator seeded with
+``BOOTSTRAP_SEED``, so the interval is the same at every call), and the interval is the 2.5th to
+97.5th percentile of the ratio over the draws. With one goal there is no interval.
 """
 
 from __future__ import annotations
@@ -17,15 +23,29 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from sqlalchemy import select
 
 from twisted.experiments.problems import EvalInputError
 from twisted.experiments.report import ResultRow, load_results
 from twisted.store.experiments import ProblemSet
 
-__all__ = ["Comparison", "LabelFigures", "compare_in_store", "compare_labels", "pair_runs"]
+__all__ = [
+    "BOOTSTRAP_DRAWS",
+    "BOOTSTRAP_SEED",
+    "Comparison",
+    "LabelFigures",
+    "compare_in_store",
+    "compare_labels",
+    "pair_runs",
+    "ratio_intervals",
+]
 
 RunKey = tuple[str, str, int, float, float]  # set, goal, seed, timeout, friction scale
+Interval = tuple[float, float]
+
+BOOTSTRAP_DRAWS = 2000
+BOOTSTRAP_SEED = 0
 
 
 @dataclass(frozen=True)
@@ -58,6 +78,10 @@ class Comparison:
     calls_both_b: float | None
     median_ratio: float | None  # median of a's / b's calls to solve, runs both solved
     a_fewer: int  # runs both solved where a took fewer calls
+    # 95 % intervals of calls_both_ratio and all_calls_ratio, goals resampled (None: one goal, or no
+    # draw where the ratio is defined)
+    calls_both_interval: Interval | None = None
+    all_calls_interval: Interval | None = None
 
     @property
     def calls_both_ratio(self) -> float | None:
@@ -84,6 +108,8 @@ class Comparison:
             "median_ratio": self.median_ratio,
             "a_fewer": self.a_fewer,
             "all_calls_ratio": self.all_calls_ratio,
+            "calls_both_interval": _listed(self.calls_both_interval),
+            "all_calls_interval": _listed(self.all_calls_interval),
         }
         for side, f in (("a", self.a), ("b", self.b)):
             out[side] = {
@@ -96,6 +122,10 @@ class Comparison:
                 "all_calls_per_solved": f.all_calls_per_solved,
             }
         return out
+
+
+def _listed(interval: Interval | None) -> list[float] | None:
+    return None if interval is None else list(interval)
 
 
 def _key(r: ResultRow) -> RunKey:
@@ -132,6 +162,52 @@ def _figures(label: str, runs: Sequence[ResultRow]) -> LabelFigures:
     )
 
 
+def _interval(numerator: np.ndarray, denominator: np.ndarray) -> Interval | None:
+    defined = denominator > 0
+    if not defined.any():
+        return None
+    ratios = numerator[defined] / denominator[defined]
+    low, high = np.percentile(ratios, [2.5, 97.5])
+    return float(low), float(high)
+
+
+def ratio_intervals(
+    ra: dict[RunKey, ResultRow],
+    rb: dict[RunKey, ResultRow],
+    draws: int = BOOTSTRAP_DRAWS,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[Interval | None, Interval | None]:
+    """95 % intervals of the calls-per-goal ratio on the runs both solved and of the all-calls ratio,
+    over the runs both labels have, by a bootstrap over goals (see the module docstring)."""
+    keys = sorted(set(ra) & set(rb))
+    goals = sorted({(k[0], k[1]) for k in keys})
+    if len(goals) < 2:
+        return None, None
+    index = {goal: i for i, goal in enumerate(goals)}
+    # per goal: calls to solve of a and b on the runs both solved; all calls and solved runs of each
+    sums = np.zeros((6, len(goals)))
+    for k in keys:
+        i, x, y = index[(k[0], k[1])], ra[k], rb[k]
+        if x.solved and y.solved:
+            sums[0, i] += _calls_to_solve(x)
+            sums[1, i] += _calls_to_solve(y)
+        sums[2, i] += x.sim_calls or 0
+        sums[3, i] += x.solved
+        sums[4, i] += y.sim_calls or 0
+        sums[5, i] += y.solved
+    rng = np.random.default_rng(seed)
+    drawn = rng.integers(0, len(goals), size=(draws, len(goals)))
+    weights = np.zeros((draws, len(goals)))
+    np.add.at(weights, (np.arange(draws)[:, None], drawn), 1.0)
+    both_a, both_b, all_a, solved_a, all_b, solved_b = (weights @ sums.T).T  # each (draws,)
+    both = _interval(both_a, both_b)
+    per_a = np.divide(all_a, solved_a, out=np.full(draws, np.nan), where=solved_a > 0)
+    per_b = np.divide(all_b, solved_b, out=np.full(draws, np.nan), where=solved_b > 0)
+    usable = np.isfinite(per_a) & np.isfinite(per_b)
+    every = _interval(per_a[usable], per_b[usable])
+    return both, every
+
+
 def _compare(
     scope: str, ra: dict[RunKey, ResultRow], rb: dict[RunKey, ResultRow], a: str, b: str
 ) -> Comparison:
@@ -151,6 +227,7 @@ def _compare(
         statistics.fmean(cb) if cb else None,
         statistics.median(ratios) if ratios else None,
         sum(x < y for x, y in zip(ca, cb, strict=True)),
+        *ratio_intervals(ra, rb),
     )
 
 
