@@ -97,8 +97,8 @@ def test_the_intervals_resample_whole_goals() -> None:
         for label in ("A", "B")
     ]
     ra, rb = pair_runs(rows, "A", "B")
-    both, _ = ratio_intervals(ra, rb)
-    assert both == pytest.approx((0.5, 0.5))
+    agreed, _ = ratio_intervals(ra, rb)
+    assert agreed == pytest.approx((0.5, 0.5))
     assert json.loads(json.dumps(s4.to_dict()))["calls_both_interval"] == pytest.approx([2 / 3, 2 / 3])
 
 
