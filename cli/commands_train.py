@@ -119,8 +119,25 @@ def train_command(
     checkpoint_every_s: float = typer.Option(
         TrainConfig.checkpoint_every_s, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
     ),
+    init_model: int | None = typer.Option(
+        None,
+        "--init-model",
+        min=1,
+        metavar="MODEL_ID",
+        help="Fine-tune: start from this stored model's weights and architecture (`twisted models`; "
+        "`models --import` stores a file such as the shipped default).",
+    ),
 ) -> None:
     """Train the inverse model on the collected transitions; checkpoints go to the database."""
+    if init_model is not None:
+        if resume:
+            fail("--init-model starts a new training run: it cannot go with --resume")
+        given = [NET_OPTIONS[name] for name in NET_OPTIONS if _given(ctx, name)]
+        if given:
+            fail(
+                f"{', '.join(given)}: the architecture of a fine-tuning run is --init-model's; "
+                "leave these out"
+            )
     config = TrainConfig(
         epochs=epochs,
         hours=hours,
@@ -141,11 +158,29 @@ def train_command(
         ),
         sources=tuple(sources),
         hold_out_sets=tuple(dict.fromkeys(hold_out_sets or [])),
+        init_model_id=init_model,
     )
     if config.hold_out_sets and "search" not in config.sources:
         fail("--hold-out-set: only planner trees are held out; give --from search or --from collect,search")
     store = open_db(ctx, create=False)  # training needs collected data: a new database has none
     _train(store, config, resume, device, threads)
+
+
+# the options that set the architecture (NetConfig); a fine-tuning run takes its model's
+NET_OPTIONS = {
+    "hidden": "--hidden",
+    "layers": "--layers",
+    "components": "--components",
+    "link_head": "--link-head",
+    "new_visits": "--new-visits/--no-new-visits",
+    "move": "--move/--no-move",
+}
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """Whether option ``name`` was given on the command line (not left at its default)."""
+    source = ctx.get_parameter_source(name)  # an enum of the click that typer runs on
+    return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
 
 
 def _train(store: Any, config: TrainConfig, resume: bool, device: str, threads: int | None) -> None:
@@ -217,10 +252,17 @@ def _print_trained(outcome: Any) -> None:
             f"training run {outcome.training_run_id} stopped; continue with `twisted train --resume`"
         )
         return
+    start = m.get("init_model_id")
+    best = m.get("best_epoch")
     console.print(
-        f"model {outcome.model_id} stored (training run {outcome.training_run_id}, "
-        f"{outcome.n_train} training / {outcome.n_val} validation samples, "
-        f"best epoch {m.get('best_epoch')})"
+        f"model {outcome.model_id} stored (training run {outcome.training_run_id}"
+        + ("" if start is None else f", fine-tuned from model {start}")
+        + f", {outcome.n_train} training / {outcome.n_val} validation samples, "
+        + (
+            f"best epoch {best})"
+            if start is None or best != -1
+            else f"no epoch improved on model {start}: its weights are stored unchanged)"
+        )
     )
     console.print("  samples by source: " + _by_source(m))
     for side in ("val", "train"):
@@ -304,7 +346,8 @@ def models_command(
         table.add_row(
             str(m.id),
             m.name,
-            "-" if m.training_run_id is None else str(m.training_run_id),
+            ("-" if m.training_run_id is None else str(m.training_run_id))
+            + ("" if m.metrics.get("init_model_id") is None else f" (from {m.metrics['init_model_id']})"),
             str(m.data_size),
             _by_source(m.metrics, "train"),
             _fmt(m.metrics.get("val_loss")),

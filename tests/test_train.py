@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io
+import json
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -321,3 +323,69 @@ def test_models_import_stores_an_exported_model_and_refuses_other_files(tmp_path
     assert runner.invoke(app, ["--db", url, "models", "--export", str(out)]).exit_code == 0
     again = InverseModel.from_bytes(out.read_bytes())
     assert again.metadata == shipped.metadata
+
+
+def test_fine_tuning_starts_from_a_stored_model_and_keeps_its_architecture(
+    small_store: tuple[str, dict[str, int]],
+) -> None:
+    url, _ = small_store
+    store = open_store(url)
+    base = train(store, TrainConfig(epochs=1, **FAST))
+    base_model = load_model(store, base.model_id)
+    # the architecture asked for is replaced by the starting model's (SMALL)
+    other = replace(FAST["net"], hidden=FAST["net"].hidden * 2)
+    tuned = train(store, TrainConfig(epochs=2, **{**FAST, "net": other}, init_model_id=base.model_id))
+    model = load_model(store, tuned.model_id)
+    assert model.net.config == base_model.net.config
+    assert model.metadata["init_model_id"] == base.model_id
+    assert tuned.metrics["init_model_id"] == base.model_id
+    with store.session() as session:
+        run = session.get(TrainingRun, tuned.training_run_id)
+        history = run.metrics["history"]
+        assert run.parameters["init_model_id"] == base.model_id
+    # the starting weights are scored first, on the same validation samples as the epochs
+    assert [h["epoch"] for h in history] == [-1, 0, 1]
+    assert history[0]["val_loss"] == pytest.approx(base.metrics["val_loss"], rel=1e-5)
+    best = min(history, key=lambda h: h["val_loss"])
+    assert tuned.metrics["best_epoch"] == best["epoch"]
+    assert tuned.metrics["val_loss"] == pytest.approx(best["val_loss"], rel=1e-5)
+    # the first epoch moved on from the starting weights, not from a fresh initialisation
+    fresh = train(store, TrainConfig(epochs=1, **FAST))
+    assert history[1]["val_loss"] != pytest.approx(fresh.metrics["val_loss"], rel=1e-6)
+    # a fine-tuning that never improves stores the starting weights unchanged
+    still = train(store, TrainConfig(epochs=1, **{**FAST, "lr": 0.0}, init_model_id=base.model_id))
+    assert still.metrics["best_epoch"] == -1
+    kept = load_model(store, still.model_id).net.state_dict()
+    for name, tensor in base_model.net.state_dict().items():
+        assert torch.equal(kept[name], tensor), name
+
+
+def test_cli_fine_tuning_checks_its_starting_model_before_writing(
+    small_store: tuple[str, dict[str, int]],
+) -> None:
+    url, _ = small_store
+    runner = CliRunner()
+    args = ["--db", url, "train", "--epochs", "1", "--batch-size", "32", "--seed", "4"]
+    assert runner.invoke(app, [*args, "--hidden", "32"]).exit_code == 0
+    store = open_store(url)
+    with store.session() as session:
+        runs_before = len(session.scalars(select(TrainingRun)).all())
+    for extra, message in (
+        (["--init-model", "7"], "--init-model 7: there is no model 7"),
+        (["--init-model", "1", "--hidden", "64"], "--hidden: the architecture of a fine-tuning run"),
+        (["--init-model", "1", "--no-move"], "--no-move"),
+        (["--init-model", "1", "--resume"], "cannot go with --resume"),
+        (["--init-model", "0"], "--init-model"),
+    ):
+        result = runner.invoke(app, [*args, *extra])
+        assert result.exit_code == 2, (extra, result.output)
+        assert message in result.output, (extra, result.output)
+    with store.session() as session:
+        assert len(session.scalars(select(TrainingRun)).all()) == runs_before
+    result = runner.invoke(app, [*args, "--init-model", "1"])
+    assert result.exit_code == 0, result.output
+    assert "fine-tuned from model 1" in result.output
+    result = runner.invoke(app, ["--db", url, "models", "--json"])
+    assert result.exit_code == 0, result.output
+    listed = {m["id"]: m for m in json.loads(result.output)}
+    assert listed[2]["metrics"]["init_model_id"] == 1 and "init_model_id" not in listed[1]["metrics"]

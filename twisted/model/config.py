@@ -65,6 +65,9 @@ class TrainConfig:
     # problem sets whose goals' planner trees are left out of "search" (the runs a model is then
     # evaluated on would otherwise be in its own training data)
     hold_out_sets: tuple[str, ...] = ()
+    # fine-tuning: start from this stored model's weights (and architecture) instead of a seeded
+    # initialisation, so that what earlier data taught a model carries into training on new data
+    init_model_id: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

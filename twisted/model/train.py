@@ -69,8 +69,13 @@ class Trainer:
     """The loop on in-memory tensors: batches, loss, Adam, evaluation, and its checkpointable state."""
 
     def __init__(
-        self, train_data: TransitionData, config: TrainConfig, device: str | torch.device = "cpu"
+        self,
+        train_data: TransitionData,
+        config: TrainConfig,
+        device: str | torch.device = "cpu",
+        init: dict[str, torch.Tensor] | None = None,
     ) -> None:
+        """``init``: starting weights (fine-tuning; they must fit ``config.net``), else seeded ones."""
         if len(train_data) == 0:
             raise NoTrainingDataError(
                 "no training samples left after the validation split: collect more data"
@@ -80,7 +85,10 @@ class Trainer:
         self.data = train_data.to(self.device)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(config.seed)  # weight initialisation replays from the seed
-            self.net = InverseNet(config.net).to(self.device)
+            self.net = InverseNet(config.net)
+        if init is not None:
+            self.net.load_state_dict(init)
+        self.net = self.net.to(self.device)
         self.optimizer = torch.optim.AdamW(
             self.net.parameters(), lr=config.lr, weight_decay=config.weight_decay
         )
@@ -334,6 +342,8 @@ def train(
         unknown = [s for s in config.sources if s not in SOURCES]
         if unknown or not config.sources:
             raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(config.sources)}")
+        if config.init_model_id is not None:  # checked (and its architecture taken) before any write
+            config = replace(config, net=_init_model(store, config.init_model_id).net.config)
         found = max_transition_id(store) if "collect" in config.sources else None
         if "search" in config.sources:
             config = replace(config, max_search_node_id=max_search_node_id(store) or 0)
@@ -393,14 +403,33 @@ def train(
         len(val_data),
         config.to_dict(),
     )
-    trainer = Trainer(train_data, config, device)
+    ckpt = _latest_checkpoint(store, run_id) if resume else None
+    init = None
+    if ckpt is None and config.init_model_id is not None:
+        init = _init_model(store, config.init_model_id).net.state_dict()
+    trainer = Trainer(train_data, config, device, init=init)
     elapsed_before = 0.0
-    if resume:
-        ckpt = _latest_checkpoint(store, run_id)
-        if ckpt is not None:
-            state = torch.load(io.BytesIO(ckpt.payload), map_location=trainer.device, weights_only=False)
-            trainer.load_state_dict(state)
-            elapsed_before = ckpt.elapsed_s
+    if ckpt is not None:
+        state = torch.load(io.BytesIO(ckpt.payload), map_location=trainer.device, weights_only=False)
+        trainer.load_state_dict(state)
+        elapsed_before = ckpt.elapsed_s
+    elif init is not None and len(val_data):
+        # the starting weights compete for "best": a fine-tuning that only gets worse on the new
+        # validation samples stores them unchanged (best epoch -1)
+        start_val = evaluate(trainer.net, val_data, trainer.device)
+        history.append({"epoch": -1, "elapsed_s": 0.0, "init_model_id": config.init_model_id, **start_val})
+        trainer.note_validation(-1, start_val["val_loss"])
+        logger.info(
+            "training run %d starts from model %d: val NLL %s, link accuracy %s",
+            run_id,
+            config.init_model_id,
+            _figure(start_val.get("val_loss")),
+            _figure(start_val.get("val_link_accuracy")),
+        )
+        say(
+            f"starting from model {config.init_model_id}: validation NLL {start_val['val_loss']:.3f}, "
+            f"link accuracy {start_val['val_link_accuracy']:.3f}"
+        )
     started = time.monotonic()
     last_checkpoint = started
     budget_s = config.hours * 3600.0 if config.hours is not None else math.inf
@@ -499,6 +528,7 @@ def train(
             "elapsed_s": round(elapsed(), 1),
             "n_train": len(train_data),
             **by_source,
+            **({} if config.init_model_id is None else {"init_model_id": config.init_model_id}),
         }
     )
     net = trainer.net.to("cpu")
@@ -510,6 +540,7 @@ def train(
             "data_sources": train_data.count_by_source(),
             "n_val": len(val_data),
             "max_transition_id": max_id,
+            "init_model_id": config.init_model_id,
             "metrics": metrics,
             "parameters": config.to_dict(),
             "command": command,
@@ -535,6 +566,16 @@ def train(
         _figure(metrics.get("val_loss")),
     )
     return TrainOutcome(run_id, "finished", model_id, metrics, len(train_data), len(val_data))
+
+
+def _init_model(store: Store, model_id: int) -> InverseModel:
+    """The stored model a fine-tuning run starts from (ValueError naming it when it cannot be used)."""
+    from twisted.model.registry import ModelError, load_model
+
+    try:
+        return load_model(store, model_id)
+    except ModelError as exc:
+        raise ValueError(f"--init-model {model_id}: {exc}") from exc
 
 
 def _figure(value: float | None) -> str:
