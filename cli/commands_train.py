@@ -101,8 +101,9 @@ def train_command(
         typer.Option(
             "--hold-out-set",
             metavar="SET",
-            help="Leave out the planner trees of runs towards this problem set's goals (the sets the "
-            "model is then evaluated on); repeatable. Needs --from ...search.",
+            help="Leave out what would show the model this problem set's goals (the sets it is then "
+            "evaluated on): the planner trees of runs towards them, and every transition or tree edge "
+            "that reaches one of their states; repeatable.",
         ),
     ] = None,
     val_fraction: float = typer.Option(TrainConfig.val_fraction, "--val-fraction", min=0.0, max=0.9),
@@ -160,8 +161,6 @@ def train_command(
         hold_out_sets=tuple(dict.fromkeys(hold_out_sets or [])),
         init_model_id=init_model,
     )
-    if config.hold_out_sets and "search" not in config.sources:
-        fail("--hold-out-set: only planner trees are held out; give --from search or --from collect,search")
     store = open_db(ctx, create=False)  # training needs collected data: a new database has none
     _train(store, config, resume, device, threads)
 

@@ -337,9 +337,6 @@ def test_held_out_sets_leave_out_the_trees_of_runs_towards_their_goals(sqlite_ur
         app, ["--db", sqlite_url, "train", "--from", "collect,search", "--hold-out-set", "nope"]
     )
     assert bad.exit_code == 2 and "--hold-out-set" in bad.output and "eval-3" in bad.output, bad.output
-    # holding out without tree edges means nothing: refused before the database is opened
-    bad = runner.invoke(app, ["--db", sqlite_url, "train", "--hold-out-set", "eval-3"])
-    assert bad.exit_code == 2 and "--from" in bad.output, bad.output
     store = open_store(sqlite_url)
     with store.session() as session:
         assert session.query(TrainingRun).count() == runs_before
@@ -353,4 +350,53 @@ def test_held_out_sets_leave_out_the_trees_of_runs_towards_their_goals(sqlite_ur
     info = list_models(store)[0]
     n_search = info.metrics["n_train_search"] + info.metrics["n_val_search"]
     assert n_search == len(every - set(held))
+    store.close()
+
+
+def test_held_out_sets_leave_out_every_sample_that_reaches_their_goals(sqlite_url: str) -> None:
+    fill_store(sqlite_url, 60)
+    kept_tree = add_tree(sqlite_url, None, seed=6, goal_p=PData.from_crossings([(1, 2, 1)]))
+    store = open_store(sqlite_url)
+    every = load_samples(store, ("collect", "search"))
+    reached = [every.state_keys[i] for i in every.to_state.tolist()]
+    # the goal: the state most samples reach, so that both sources are likely to lose some
+    goal_key = max(set(reached), key=reached.count)
+    goal = parse_p_data(goal_key)
+    with store.session(write=True) as session:
+        save_problem_set(session, "eval-g", [ProblemRecord(None, 0, goal, 1, "test")], source="made")
+    left = load_samples(store, ("collect", "search"), hold_out_sets=["eval-g"])
+    expected = {
+        (int(src), int(t))
+        for src, t, key in zip(every.source.tolist(), every.transition_ids.tolist(), reached, strict=True)
+        if key != goal_key
+    }
+    assert {
+        (int(s), int(t)) for s, t in zip(left.source.tolist(), left.transition_ids.tolist(), strict=True)
+    } == expected
+    assert len(left) < len(every) and goal_key not in {left.state_keys[i] for i in left.to_state.tolist()}
+    search = left.source == SOURCES.index("search")
+    assert set(kept_tree) & set(left.transition_ids[search].tolist())  # other edges stay
+    store.close()
+    # the CLI holds out with collected transitions alone too
+    result = CliRunner().invoke(
+        app,
+        [
+            "--db",
+            sqlite_url,
+            "train",
+            "--epochs",
+            "1",
+            "--batch-size",
+            "16",
+            "--hidden",
+            "32",
+            "--hold-out-set",
+            "eval-g",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    store = open_store(sqlite_url)
+    info = list_models(store)[0]
+    n_collect = int((left.source == SOURCES.index("collect")).sum())
+    assert info.metrics["n_train_collect"] + info.metrics["n_val_collect"] == n_collect
     store.close()

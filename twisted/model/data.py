@@ -17,8 +17,11 @@ what inference is given). The train/validation split hashes the START configurat
 so validation never contains a start configuration seen in training: a transition's start is its
 ``from_configuration_id``; a tree edge's is its parent node (key ``-node id``), except that an edge
 from a tree's root takes the run's start configuration (the D_Q straight rope for runs from it), so
-that both sources put one configuration on one side. Trees of runs whose goal is a goal of a
-held-out problem set (``hold_out_sets``: the sets a model is then evaluated on) are left out.
+that both sources put one configuration on one side. A held-out problem set (``hold_out_sets``:
+the sets a model is then evaluated on) leaves out the trees of runs whose goal is one of its goals,
+and every sample of either source that reaches one of its goal states (for a knot goal, any state
+of that knot at its crossing count), so that a model has never been shown a curve into a goal it is
+then evaluated on.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import torch
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, aliased
 
-from twisted.goals import make_goal
+from twisted.goals import Goal, make_goal
 from twisted.model.augment import VARIANTS, apply_variant_p_data
 from twisted.model.config import SOURCES
 from twisted.model.encoding import (
@@ -257,10 +260,11 @@ def load_samples(
         raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(sources) or 'none'}")
     parts: list[_Rows] = []
     with store.session() as session:
+        goal_states = _held_out_goal_states(session, hold_out_sets) if hold_out_sets else []
         if "collect" in sources:
-            parts.append(_read_transitions(session, max_id, chunk_size, progress))
+            parts.append(_read_transitions(session, max_id, chunk_size, progress, goal_states))
         if "search" in sources:
-            parts.append(_read_tree_edges(session, max_node_id, hold_out_sets))
+            parts.append(_read_tree_edges(session, max_node_id, hold_out_sets, goal_states))
         n = sum(len(p.ids) for p in parts)
         if n == 0:
             raise _no_data(store, sources)
@@ -294,9 +298,15 @@ def load_samples(
 
 
 def _read_transitions(
-    session: Session, max_id: int | None, chunk_size: int, progress: Callable[[int, int], None] | None
+    session: Session,
+    max_id: int | None,
+    chunk_size: int,
+    progress: Callable[[int, int], None] | None,
+    held_out_states: Sequence[int] = (),
 ) -> _Rows:
     where = _usable() + ([Transition.id <= max_id] if max_id is not None else [])
+    if held_out_states:
+        where.append(Transition.to_state_id.not_in(list(held_out_states)))
     n = int(session.scalar(select(func.count()).select_from(Transition).where(*where)) or 0)
     out = _Rows.empty(n, COLLECT)
     if n == 0:
@@ -344,7 +354,12 @@ def _straight_rope_configuration(session: Session) -> int:
     return int(found or 0)
 
 
-def _read_tree_edges(session: Session, max_node_id: int | None, hold_out_sets: Sequence[str]) -> _Rows:
+def _read_tree_edges(
+    session: Session,
+    max_node_id: int | None,
+    hold_out_sets: Sequence[str],
+    held_out_states: Sequence[int] = (),
+) -> _Rows:
     parent = aliased(SearchNode)
     where = [
         SearchNode.parent_id.is_not(None),
@@ -354,6 +369,8 @@ def _read_tree_edges(session: Session, max_node_id: int | None, hold_out_sets: S
     ] + ([SearchNode.id <= max_node_id] if max_node_id is not None else [])
     if hold_out_sets:
         where.append(SearchNode.run_id.not_in(_held_out_runs(session, hold_out_sets)))
+    if held_out_states:
+        where.append(SearchNode.state_id.not_in(list(held_out_states)))
     stmt = (
         select(
             SearchNode.id,
@@ -392,15 +409,30 @@ def _read_tree_edges(session: Session, max_node_id: int | None, hold_out_sets: S
     return out
 
 
-def _held_out_runs(session: Session, set_names: Sequence[str]) -> list[int]:
-    """The planner runs towards a goal of the named problem sets: the same P-data goal, or for a knot goal
-    (``knot:<name>@<crossings>``) the same knot from the same crossing count."""
+def _held_out_goals(session: Session, set_names: Sequence[str]) -> list[Goal]:
     specs = session.scalars(
         select(Problem.goal_key)
         .join(ProblemSet, ProblemSet.id == Problem.set_id)
         .where(ProblemSet.name.in_(list(set_names)))
     ).all()
-    goals = [make_goal(spec) for spec in specs]
+    return [make_goal(spec) for spec in specs]
+
+
+def _held_out_goal_states(session: Session, set_names: Sequence[str]) -> list[int]:
+    """The stored states (ids) that are goals of the named problem sets: a P-data goal's state, every
+    member state of a knot goal."""
+    keys = sorted({key for goal in _held_out_goals(session, set_names) for key in goal.keys})
+    if not keys:
+        return []
+    return sorted(
+        session.scalars(select(TopologicalState.id).where(TopologicalState.key.in_(keys))).all()
+    )
+
+
+def _held_out_runs(session: Session, set_names: Sequence[str]) -> list[int]:
+    """The planner runs towards a goal of the named problem sets: the same P-data goal, or for a knot goal
+    (``knot:<name>@<crossings>``) the same knot from the same crossing count."""
+    goals = _held_out_goals(session, set_names)
     state_keys = [g.representative.key for g in goals if g.knot is None]
     knots = {(g.knot, g.cross) for g in goals if g.knot is not None}
     runs = set(
