@@ -62,7 +62,8 @@ class TrainConfig:
     sources: tuple[str, ...] = ("collect",)
     # the tree snapshot (newest search node id) of a run that reads "search"; set when it starts
     max_search_node_id: int | None = None
-    # problem sets whose goals' planner trees are left out of "search" (the runs a model is then
+    # problem sets whose goals are kept from the model: the planner trees of runs towards them, and
+    # every sample of either source that reaches one of their states (the runs a model is then
     # evaluated on would otherwise be in its own training data)
     hold_out_sets: tuple[str, ...] = ()
     # fine-tuning: start from this stored model's weights (and architecture) instead of a seeded
