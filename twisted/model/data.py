@@ -219,7 +219,8 @@ def load_tree_edges(
     store: Store, *, max_node_id: int | None = None, hold_out_sets: Sequence[str] = ()
 ) -> TransitionData:
     """Every planner tree edge adding crossings (up to :data:`MAX_CROSSINGS`), node id <= ``max_node_id``,
-    except in the trees of runs towards a goal of one of ``hold_out_sets``."""
+    except in the trees of runs towards a goal of one of ``hold_out_sets`` and those reaching one of
+    its goal states."""
     return load_samples(store, ("search",), max_node_id=max_node_id, hold_out_sets=hold_out_sets)
 
 
@@ -253,18 +254,20 @@ def load_samples(
     progress: Callable[[int, int], None] | None = None,
 ) -> TransitionData:
     """Samples of the given :data:`SOURCES`: transitions up to ``max_id``, tree edges up to
-    ``max_node_id`` (None: all) outside the trees of runs towards a goal of ``hold_out_sets``.
+    ``max_node_id`` (None: all) outside the trees of runs towards a goal of ``hold_out_sets``, and
+    none of either source that reaches one of their goal states.
     Raises :class:`NoTrainingDataError` when there are none."""
     unknown = [s for s in sources if s not in SOURCES]
     if unknown or not sources:
         raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(sources) or 'none'}")
     parts: list[_Rows] = []
     with store.session() as session:
-        goal_states = _held_out_goal_states(session, hold_out_sets) if hold_out_sets else []
+        goals = _held_out_goals(session, hold_out_sets) if hold_out_sets else []
+        goal_states = _goal_state_ids(session, goals)
         if "collect" in sources:
             parts.append(_read_transitions(session, max_id, chunk_size, progress, goal_states))
         if "search" in sources:
-            parts.append(_read_tree_edges(session, max_node_id, hold_out_sets, goal_states))
+            parts.append(_read_tree_edges(session, max_node_id, goals, goal_states))
         n = sum(len(p.ids) for p in parts)
         if n == 0:
             raise _no_data(store, sources)
@@ -357,7 +360,7 @@ def _straight_rope_configuration(session: Session) -> int:
 def _read_tree_edges(
     session: Session,
     max_node_id: int | None,
-    hold_out_sets: Sequence[str],
+    held_out_goals: Sequence[Goal] = (),
     held_out_states: Sequence[int] = (),
 ) -> _Rows:
     parent = aliased(SearchNode)
@@ -367,8 +370,8 @@ def _read_tree_edges(
         SearchNode.cross > parent.cross,
         SearchNode.cross <= MAX_CROSSINGS,
     ] + ([SearchNode.id <= max_node_id] if max_node_id is not None else [])
-    if hold_out_sets:
-        where.append(SearchNode.run_id.not_in(_held_out_runs(session, hold_out_sets)))
+    if held_out_goals:
+        where.append(SearchNode.run_id.not_in(_held_out_runs(session, held_out_goals)))
     if held_out_states:
         where.append(SearchNode.state_id.not_in(list(held_out_states)))
     stmt = (
@@ -410,6 +413,7 @@ def _read_tree_edges(
 
 
 def _held_out_goals(session: Session, set_names: Sequence[str]) -> list[Goal]:
+    """The goals of the named problem sets."""
     specs = session.scalars(
         select(Problem.goal_key)
         .join(ProblemSet, ProblemSet.id == Problem.set_id)
@@ -418,21 +422,18 @@ def _held_out_goals(session: Session, set_names: Sequence[str]) -> list[Goal]:
     return [make_goal(spec) for spec in specs]
 
 
-def _held_out_goal_states(session: Session, set_names: Sequence[str]) -> list[int]:
-    """The stored states (ids) that are goals of the named problem sets: a P-data goal's state, every
-    member state of a knot goal."""
-    keys = sorted({key for goal in _held_out_goals(session, set_names) for key in goal.keys})
+def _goal_state_ids(session: Session, goals: Sequence[Goal]) -> list[int]:
+    """The stored states (ids) that are members of ``goals``: a P-data goal's state, every member
+    state of a knot goal."""
+    keys = sorted({key for goal in goals for key in goal.keys})
     if not keys:
         return []
-    return sorted(
-        session.scalars(select(TopologicalState.id).where(TopologicalState.key.in_(keys))).all()
-    )
+    return sorted(session.scalars(select(TopologicalState.id).where(TopologicalState.key.in_(keys))).all())
 
 
-def _held_out_runs(session: Session, set_names: Sequence[str]) -> list[int]:
-    """The planner runs towards a goal of the named problem sets: the same P-data goal, or for a knot goal
+def _held_out_runs(session: Session, goals: Sequence[Goal]) -> list[int]:
+    """The planner runs towards one of ``goals``: the same P-data goal, or for a knot goal
     (``knot:<name>@<crossings>``) the same knot from the same crossing count."""
-    goals = _held_out_goals(session, set_names)
     state_keys = [g.representative.key for g in goals if g.knot is None]
     knots = {(g.knot, g.cross) for g in goals if g.knot is not None}
     runs = set(

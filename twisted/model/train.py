@@ -329,6 +329,7 @@ def train(
     """
     say = log or (lambda _msg: None)
     command = command or " ".join(shlex.quote(a) for a in sys.argv)
+    start_net: InverseNet | None = None  # the model a fine-tuning run starts from, read once
     if resume:
         run = _newest_resumable(store)
         if run is None:
@@ -343,7 +344,8 @@ def train(
         if unknown or not config.sources:
             raise ValueError(f"sources must be among {', '.join(SOURCES)}, got {', '.join(config.sources)}")
         if config.init_model_id is not None:  # checked (and its architecture taken) before any write
-            config = replace(config, net=_init_model(store, config.init_model_id).net.config)
+            start_net = _init_model(store, config.init_model_id).net
+            config = replace(config, net=start_net.config)
         found = max_transition_id(store) if "collect" in config.sources else None
         if "search" in config.sources:
             config = replace(config, max_search_node_id=max_search_node_id(store) or 0)
@@ -406,7 +408,9 @@ def train(
     ckpt = _latest_checkpoint(store, run_id) if resume else None
     init = None
     if ckpt is None and config.init_model_id is not None:
-        init = _init_model(store, config.init_model_id).net.state_dict()
+        if start_net is None:  # a resumed run that stopped before its first checkpoint
+            start_net = _init_model(store, config.init_model_id).net
+        init = start_net.state_dict()
     trainer = Trainer(train_data, config, device, init=init)
     elapsed_before = 0.0
     if ckpt is not None:
