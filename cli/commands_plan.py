@@ -34,6 +34,7 @@ from cli.app import (
 from cli.options import (
     Heuristic,
     Planner,
+    cross_move_option,
     json_option,
     k_expand_option,
     k_option,
@@ -89,6 +90,7 @@ def plan_command(
     k_expand: int | None = k_expand_option(),
     retry_weight: float | None = retry_weight_option(),
     state_prior: float | None = state_prior_option(),
+    cross_move: float | None = cross_move_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
@@ -148,6 +150,7 @@ def plan_command(
             "k_expand": k_expand,
             "retry_weight": retry_weight,
             "state_prior": state_prior,
+            "cross_move": cross_move,
             "plan_limit": plan_limit,
             "tighten": True if tighten else None,
         },

@@ -185,6 +185,24 @@ def state_prior_option() -> Any:
     )
 
 
+def _check_cross_move(share: float | None) -> float | None:
+    if share is not None and not 0.0 <= share <= 1.0:  # NaN fails both comparisons
+        raise _bad(f"--cross-move {share}: must be a share of the K curves in [0, 1]")
+    return share
+
+
+def cross_move_option() -> Any:
+    """``--cross-move`` of the commands that run the planner; None: PlannerOptions.cross_move."""
+    return typer.Option(
+        None,
+        "--cross-move",
+        callback=_check_cross_move,
+        help="Share of the K curves of a plan step toward a Cross move that are scripted (the tip, or "
+        "the crossed strand, carried across; planner twisted) instead of drawn from the model "
+        f"(0: all from the model; default {PlannerOptions.cross_move:g}).",
+    )
+
+
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

@@ -483,6 +483,16 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
         assert (plan_run.parameters["k"], plan_run.parameters["p_expand"]) == (2, 0.5)
         assert plan_run.parameters["retry_weight"] == 1.0
 
+    # results stored before --cross-move existed ran without scripted curves: they count as 0
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x")):
+            assert run.parameters["cross_move"] == 0.0
+            run.parameters = {k: v for k, v in run.parameters.items() if k != "cross_move"}
+    before = runner.invoke(app, [*args, "--label", "x"])
+    assert before.exit_code == 0 and "1 finished before" in " ".join(before.output.split()), before.output
+    scripted = runner.invoke(app, [*args, "--label", "x", "--cross-move", "0.5"])
+    assert scripted.exit_code == 2 and "cross_move 0.0 (now 0.5)" in " ".join(scripted.output.split())
+
     # results stored before the defaults were stored as values (the option left out) are not reused
     # by an evaluation with today's defaults, whose values may differ from those of their day
     with open_store(sqlite_url) as store, store.session(write=True) as session:

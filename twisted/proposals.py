@@ -1,4 +1,5 @@
-"""Curve proposals of the collector: uniform random curves, and curves aimed across another strand.
+"""Curve proposals: the collector's (uniform random curves, curves aimed across another strand) and
+the planner's scripted Cross move (:func:`cross_move_curve`).
 
 A uniform curve (link, z_max, x, y all uniform) rarely adds a crossing once the rope has a few: most
 displacements drag the link somewhere no other strand lies (the collector kept 3.5 % of them). An
@@ -10,16 +11,28 @@ The proposal only changes which curves are tried. Every transition is still labe
 the simulator reached (hindsight), so the data stays exactly what the inverse model needs: curves
 that took ``q`` to ``s'``; a mixture with uniform curves (``across_share`` < 1) keeps every curve
 possible.
+
+A *Cross move curve* is aimed at one high-level move, ``Cross(end segment e, segment b, side, O/U)``
+(:mod:`twisted.moves`): it finds segment b on the rope (between its two crossings along the rope),
+picks a point of b near the tip of e, and carries a link across: for "O" the tip's own link, lifted
+over b; for "U", which a lifted tip cannot make, the link of b at that point, lifted over the tip
+(the same crossing seen from the other strand). Only points of b where such a crossing would get
+the move's sign are aimed at (the sign is what tells the two sides of b apart), nearer ones more
+often. It is geometry only; whether it made the move is for the simulator to say (docs/DESIGN.md
+section 8).
 """
 
 from __future__ import annotations
+
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, sample_curve
+from twisted.topology import cross2, projected_crossings
 
-__all__ = ["CURVE_PROPOSALS", "across_curve", "propose_curve"]
+__all__ = ["CURVE_PROPOSALS", "across_curve", "cross_move_curve", "propose_curve", "segment_bounds"]
 
 CURVE_PROPOSALS = ("uniform", "across")
 
@@ -57,3 +70,75 @@ def propose_curve(rng: np.random.Generator, points: npt.ArrayLike | None, across
     if points is not None and across_share > 0 and rng.random() < across_share:
         return across_curve(rng, points)
     return sample_curve(rng)
+
+
+# -- the planner's scripted Cross move -------------------------------------------------------------------
+
+# How far past the crossed strand the carried link is put down (m), how high it is lifted (m), how
+# sharply nearer points of b are preferred (m), and how much of b next to its crossings is left out
+# (in links).
+CROSS_BEYOND_M = (0.03, 0.12)
+CROSS_LIFT_M = (0.03, 0.07)
+CROSS_REACH_M = 0.1
+CROSS_END_PAD = 0.3
+# the tip's own link, or the next one, carries the tip over b
+CROSS_TIP_LINK_P = 0.6
+
+
+class CrossMove(Protocol):
+    """What :func:`cross_move_curve` reads of a ``twisted.moves.Move`` of kind ``Cross``."""
+
+    segment: int
+    other_segment: int | None
+    over: str | None
+    sign: str | None
+
+
+def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Where the P-data segments of a rope lie: ``2k + 2`` rope parameters (link index + fraction along
+    it), 0 at the head, one per crossing visit in walking order, ``N_LINKS`` at the tail; segment ``s``
+    runs from entry ``s`` to entry ``s + 1``."""
+    pts = np.asarray(points, dtype=np.float64)
+    pc = projected_crossings(pts)
+    visits = np.sort(np.concatenate([pc.i + pc.t, pc.j + pc.u]))
+    return np.concatenate([[0.0], visits, [float(len(pts) - 1)]])
+
+
+def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: CrossMove) -> Curve:
+    """A curve aimed at making ``move`` (a ``Cross``) from the rope with these 22 link points."""
+    pts = np.asarray(points, dtype=np.float64)
+    if move.other_segment is None or move.over not in ("O", "U") or move.sign not in ("+", "-"):
+        raise ValueError(f"not a Cross move: {move}")
+    bounds = segment_bounds(pts)
+    if not 0 <= move.other_segment < len(bounds) - 1 or move.segment not in (0, len(bounds) - 2):
+        raise ValueError(f"{move} does not fit a rope with {len(bounds) // 2 - 1} crossings")
+    lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
+    pad = min(CROSS_END_PAD, 0.25 * (hi - lo))
+    s = np.linspace(lo + pad, hi - pad, 40)
+    link_of = np.clip(np.floor(s).astype(int), 0, N_LINKS - 1)
+    along = pts[link_of + 1] - pts[link_of]
+    at = pts[link_of] + (s - link_of)[:, None] * along
+    head = move.segment == 0
+    tip = pts[0] if head else pts[-1]
+    towards = at[:, :2] - tip[:2]
+    dist = np.hypot(towards[:, 0], towards[:, 1]) + 1e-9
+    towards = towards / dist[:, None]
+    # the rope's walking direction (head -> tail) along the tip's piece where it will cross b
+    walk = -towards if head else towards
+    d_over, d_under = (walk, along[:, :2]) if move.over == "O" else (along[:, :2], walk)
+    signs = np.sign(cross2(d_over, d_under))
+    fits = signs == (1 if move.sign == "+" else -1)
+    weights = np.exp(-dist / CROSS_REACH_M) * (fits if fits.any() else 1.0)
+    c = int(rng.choice(len(s), p=weights / weights.sum()))
+    beyond = rng.uniform(*CROSS_BEYOND_M)
+    lift = rng.uniform(*CROSS_LIFT_M)
+    if move.over == "O":
+        end = 0 if head else N_LINKS - 1
+        link = end if rng.random() < CROSS_TIP_LINK_P else end + (1 if head else -1)
+        target = at[c, :2] + beyond * towards[c]
+    else:
+        link = int(link_of[c])
+        target = tip[:2] - beyond * towards[c]
+    centre = 0.5 * (pts[link, :2] + pts[link + 1, :2])
+    x, y = np.clip(target - centre, CURVE_LOW[2:], CURVE_HIGH[2:])
+    return Curve(link, float(lift), float(x), float(y))

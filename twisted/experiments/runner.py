@@ -395,7 +395,10 @@ RESULT_OPTIONS = (
     "k_expand",
     "retry_weight",
     "state_prior",
+    "cross_move",
 )
+# options added after evaluations were stored, with the value those evaluations ran with
+ADDED_OPTIONS = {"cross_move": 0.0}
 
 
 def _shown(stored: Any) -> str:
@@ -416,7 +419,7 @@ def _check_label_options(
     q = select(EvalRun.parameters).where(EvalRun.id.in_(runs))  # no DISTINCT: PostgreSQL's json has no "="
     ours = {key: options.get(key) for key in RESULT_OPTIONS}
     for (parameters,) in session.execute(q):
-        theirs = {key: (parameters or {}).get(key) for key in RESULT_OPTIONS}
+        theirs = {key: (parameters or {}).get(key, ADDED_OPTIONS.get(key)) for key in RESULT_OPTIONS}
         differ = [
             f"{key} {_shown(theirs[key])} (now {ours[key]})"
             for key in RESULT_OPTIONS

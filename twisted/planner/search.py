@@ -13,8 +13,10 @@ and a set of high-level plans ``P`` from every reached state to the goal. Each i
 until the goal state appears in ``T`` or the time runs out. The answer is the path of curves from
 the root of ``T`` to the goal node. Where this differs from the paper (DESIGN 8): the node choice
 weights a node by how often it was already asked for the plan's next state (the retry weight; the
-paper's choice is uniform); and, only when asked for (``state_prior > 0``), ``r(s)`` is how the plan
-steps started from ``s`` fared against those of its crossing level (the paper's crs has 1).
+paper's choice is uniform); only when asked for (``state_prior > 0``), ``r(s)`` is how the plan
+steps started from ``s`` fared against those of its crossing level (the paper's crs has 1); and with
+``cross_move > 0`` a step toward a Cross move takes that share of its K curves from a scripted curve
+(:func:`twisted.proposals.cross_move_curve`) instead of the inverse model.
 
 Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
 the same high-level plans with uniformly random curves (the paper's "low+high level");
@@ -74,8 +76,9 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # state and per (state, plan) index; [steps tried, steps achieved] per move kind in follow_plan;
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
-# steps achieved] per state a follow_plan step started from (read by the state prior)
-STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step")
+# steps achieved] per state a follow_plan step started from (read by the state prior); [curves, curves
+# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
+STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
@@ -106,6 +109,9 @@ class PlannerOptions:
     # rate (0, the default: the paper's crs, r = 1; 50 saved calls on one 4-crossing set and cost
     # calls on another, DESIGN 8)
     state_prior: float = 0.0
+    # share of the K curves of a plan step toward a Cross move that come from the scripted Cross move
+    # curve (twisted.proposals) instead of the inverse model; planner "twisted" only (DESIGN 8)
+    cross_move: float = 0.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -127,6 +133,8 @@ class PlannerOptions:
             raise ValueError(f"retry_weight must lie in (0, 1], got {self.retry_weight}")
         if not (0.0 <= self.state_prior and math.isfinite(self.state_prior)):
             raise ValueError(f"state_prior must be a finite number of tries >= 0, got {self.state_prior}")
+        if not 0.0 <= self.cross_move <= 1.0:
+            raise ValueError(f"cross_move must lie in [0, 1], got {self.cross_move}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -140,15 +148,17 @@ class PlannerOptions:
             "ucb_c": self.ucb_c,
             "retry_weight": self.retry_weight,
             "state_prior": self.state_prior,
+            "cross_move": self.cross_move,
             "tighten": self.tighten,
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
-        """The options a run stored; a run stored before ``retry_weight`` or ``state_prior`` existed
-        chose its nodes uniformly and its states by the paper's crs."""
+        """The options a run stored; a run stored before ``retry_weight``, ``state_prior`` or
+        ``cross_move`` existed chose its nodes uniformly, its states by the paper's crs and all its
+        curves from its sampler."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, **known})
+        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "cross_move": 0.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -591,9 +601,13 @@ class Twisted:
         for step, (next_state, move) in enumerate(zip(plan.states[1:], plan.moves, strict=True)):
             if step:
                 self._check_stop(self._deadline_s)
-            curves = self.sampler.sample(current, next_state, move, self.options.k, self.rng)
+            curves, scripted = self.step_curves(current, next_state, move)
             children = self.simulate(current, curves, "follow_plan")
-            hit = next((c for c in children if c is not None and c.p_data == next_state), None)
+            reached = [c is not None and c.p_data == next_state for c in children]
+            hit = next((c for c, ok in zip(children, reached, strict=True) if ok), None)
+            if move is not None and move.kind == "Cross":
+                self._count("cross", "cross_move", scripted, sum(reached[:scripted]))
+                self._count("cross", "sampler", len(curves) - scripted, sum(reached[scripted:]))
             self._count("move", str(move.kind), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
             self._count("step", current.p_data.key, 1, hit is not None)
@@ -603,6 +617,26 @@ class Twisted:
                 return step
             current = hit
         return len(plan.moves)
+
+    def step_curves(self, node: Node, next_state: PData, move: Any) -> tuple[list[Any], int]:
+        """The K curves of a plan step, and how many of them (the first) are scripted Cross move curves.
+
+        With ``cross_move`` > 0 a step toward a Cross move (planner ``twisted``) takes
+        ``round(cross_move * K)`` curves from :func:`twisted.proposals.cross_move_curve` and the rest
+        from the sampler; every other step takes all K from the sampler.
+        """
+        k = self.options.k
+        scripted = 0
+        if self.options.planner == "twisted" and move is not None and move.kind == "Cross":
+            scripted = min(k, int(round(self.options.cross_move * k)))
+        curves: list[Any] = []
+        if scripted:
+            from twisted.proposals import cross_move_curve
+
+            curves = [cross_move_curve(self.rng, node.points, move) for _ in range(scripted)]
+        if scripted < k:
+            curves += self.sampler.sample(node, next_state, move, k - scripted, self.rng)
+        return curves, scripted
 
     def random_expand(self) -> None:
         """k random curves from a uniformly chosen node of ``T`` (the completeness guarantee)."""
