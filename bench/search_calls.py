@@ -7,7 +7,9 @@ checkpoint: the simulator calls per source of curves (follow_plan: the sampler f
 high-level plan; random_expand: the random curves of RandomExpand; low_level_only: the baseline)
 with the results kept in T, and per move kind how many follow_plan steps were tried and how many
 reached the plan's next state (K curves per step), and the share of steps that retried a (node,
-next state) pair tried before (what the planner's retry weight holds down). Runs made before these
+next state) pair tried before (what the planner's retry weight holds down), and for the steps
+toward a Cross move how many curves each proposer made and how many reached the plan's next state
+(`script`: ``--cross-move``'s scripted curves, `model`: the sampler's). Runs made before these
 counts were kept show only their totals. Prints one table; --json writes the figures.
 """
 
@@ -53,6 +55,7 @@ def main() -> None:
             "to_solve": [],
             "calls_by": {},
             "moves": {},
+            "cross": {},
             "pairs": None,
         }
 
@@ -87,6 +90,7 @@ def main() -> None:
                 g["counted"] += 1
                 _add(g["calls_by"], stats["calls"])
                 _add(g["moves"], stats.get("move", {}))
+                _add(g["cross"], stats.get("cross", {}))
             if "pair" in stats:
                 tries = [entry[0] for entry in stats["pair"].values()]
                 steps, retries = g["pairs"] or (0.0, 0.0)
@@ -117,6 +121,14 @@ def main() -> None:
             for kind, (tried, reached) in sorted(g["moves"].items())
             if tried
         )
+        cross = "  ".join(
+            f"{name} {int(reached)}/{int(tried)} ({reached / tried:.1%})"
+            for key, name in (("cross_move", "script"), ("sampler", "model"))
+            for tried, reached in [g["cross"].get(key, (0.0, 0.0))]
+            if tried
+        )
+        if cross:
+            moves += f"  | Cross curves: {cross}"
         print(
             f"{set_name:8} {label:22} {seed:>4} {g['solved']:>3}/{g['runs']:<3} {mean_to_solve:>12,.0f} "
             f"{g['calls']:>8,} {share} {retried}  {moves if counted else '(run before the counts were kept)'}"
@@ -132,6 +144,7 @@ def main() -> None:
                 "calls": g["calls"],
                 "calls_by_source": by if counted else None,
                 "steps_by_move": g["moves"] if counted else None,
+                "cross_curves": g["cross"] if counted else None,
                 "retried_step_share": pairs[1] / pairs[0] if pairs and pairs[0] else None,
             }
         )
