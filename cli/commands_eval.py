@@ -34,6 +34,7 @@ from cli.options import (
     k_option,
     p_expand_option,
     print_json,
+    r1_room_option,
     ray_address_argument,
     retry_weight_option,
     seeds_option,
@@ -315,12 +316,13 @@ def eval_command(
     retry_weight: float | None = retry_weight_option(),
     state_prior: float | None = state_prior_option(),
     cross_move: float | None = cross_move_option(),
+    r1_room: float | None = r1_room_option(),
     label: str = typer.Option(
         None,
         "--label",
         help="Name the results are stored under (default: planner[-heuristic]); results under one label "
         "must share the planner, model, heuristic, --k, --p-expand, --k-expand, --retry-weight, "
-        "--state-prior and --cross-move.",
+        "--state-prior, --cross-move and --r1-room.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
@@ -350,6 +352,7 @@ def eval_command(
         retry_weight=retry_weight,
         state_prior=state_prior,
         cross_move=cross_move,
+        r1_room=r1_room,
     )
     requests = [
         EvalOptions(

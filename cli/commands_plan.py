@@ -40,6 +40,7 @@ from cli.options import (
     k_option,
     p_expand_option,
     print_json,
+    r1_room_option,
     retry_weight_option,
     state_prior_option,
     value,
@@ -91,6 +92,7 @@ def plan_command(
     retry_weight: float | None = retry_weight_option(),
     state_prior: float | None = state_prior_option(),
     cross_move: float | None = cross_move_option(),
+    r1_room: float | None = r1_room_option(),
     plan_limit: int | None = typer.Option(
         None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
@@ -151,6 +153,7 @@ def plan_command(
             "retry_weight": retry_weight,
             "state_prior": state_prior,
             "cross_move": cross_move,
+            "r1_room": r1_room,
             "plan_limit": plan_limit,
             "tighten": True if tighten else None,
         },

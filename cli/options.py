@@ -203,6 +203,24 @@ def cross_move_option() -> Any:
     )
 
 
+def _check_r1_room(links: float | None) -> float | None:
+    if links is not None and not 0.0 <= links <= 21:  # NaN fails both comparisons
+        raise _bad(f"--r1-room {links}: must be a number of links in [0, 21]")
+    return links
+
+
+def r1_room_option() -> Any:
+    """``--r1-room`` of the commands that run the planner; None: PlannerOptions.r1_room."""
+    return typer.Option(
+        None,
+        "--r1-room",
+        callback=_check_r1_room,
+        help="Node choice for an R1 step: a node whose segment for the curl is shorter than this many "
+        "links gets weight (length / r1_room)^2 (0: off; default "
+        f"{PlannerOptions.r1_room:g}).",
+    )
+
+
 def json_option(what: str) -> Any:
     """The ``--json`` option of every command that lists or reports something."""
     return typer.Option(False, "--json", help=f"Print {what} as JSON.")

@@ -1,4 +1,5 @@
-"""The scripted Cross move curve (twisted.proposals) and the planner's use of it (``--cross-move``).
+"""The scripted Cross move curve (twisted.proposals) and the planner's use of it (``--cross-move``);
+the node choice for an R1 step by the room its segment leaves for the curl (``--r1-room``).
 
 The rope configurations are made by the simulator from the straight rope with seeded curves, so each
 test sees the same ropes every time.
@@ -6,6 +7,7 @@ test sees the same ropes every time.
 
 from __future__ import annotations
 
+from collections import Counter
 from functools import cache
 from typing import Any
 
@@ -15,6 +17,7 @@ import pytest
 from twisted.goals import PlanInputError, check_goal
 from twisted.moves import Move, plans, successors
 from twisted.planner import Node, PlannerOptions, SearchTree, Twisted, planner_options
+from twisted.planner.search import R1_ROOM_FLOOR
 from twisted.proposals import across_curve, cross_move_curve, segment_bounds
 from twisted.sim import N_LINKS, Curve, RopeSim, sample_curve
 from twisted.topology import PData, top
@@ -179,3 +182,53 @@ def test_the_cross_move_share_is_checked_and_runs_stored_before_it_had_none() ->
     assert PlannerOptions.from_dict(stored).cross_move == 0.5
     del stored["cross_move"]
     assert PlannerOptions.from_dict(stored).cross_move == 0.0
+
+
+# ---- R1 room: the node choice for a curl ----------------------------------------------------------
+
+
+def test_the_r1_room_weight_is_the_squared_share_of_the_room_asked_for() -> None:
+    search, _ = _search("twisted", 0.0)
+    search = Twisted(
+        search.goal, search.tree, PlannerOptions(r1_room=8.0), pool=None, high_level=search.high_level
+    )  # type: ignore[arg-type]
+    node = search.tree.nodes[0]
+    bounds = segment_bounds(node.points)
+    for segment in range(len(bounds) - 1):
+        length = bounds[segment + 1] - bounds[segment]
+        expected = max(R1_ROOM_FLOOR, min(1.0, length / 8.0) ** 2)
+        assert search.r1_room_weight(node, segment) == pytest.approx(expected)
+
+
+def test_an_r1_step_goes_to_the_nodes_with_room_for_the_curl() -> None:
+    """Two nodes of one state: the plan's R1 segment spans 2 links in one and 8 in the other."""
+    search, _ = _search("twisted", 0.0)
+    node = search.tree.nodes[0]
+    search.tree.add(Node(1, 0, node.q, node.points, node.p_data, None, 0, 0))
+    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
+    bounds = np.array([0.0, 5.0, 7.0, 15.0, 21.0])
+    search._bounds = {0: bounds, 1: np.array([0.0, 5.0, 13.0, 15.0, 21.0])}
+    counts = Counter(
+        search.select_configuration(node.p_data.key, r1.state, r1.move).index for _ in range(3000)
+    )
+    assert counts[0] / 3000 == pytest.approx(0.5, abs=0.03)  # off: uniform
+    search.options = PlannerOptions(r1_room=8.0)
+    counts = Counter(
+        search.select_configuration(node.p_data.key, r1.state, r1.move).index for _ in range(3000)
+    )
+    share = (2 / 8) ** 2 / ((2 / 8) ** 2 + 1.0)
+    assert counts[0] / 3000 == pytest.approx(share, abs=0.02), counts
+    # a Cross step is not weighted by room
+    cross = _cross_moves(node.p_data)[0]
+    counts = Counter(
+        search.select_configuration(node.p_data.key, cross[0], cross[1]).index for _ in range(3000)
+    )
+    assert counts[0] / 3000 == pytest.approx(0.5, abs=0.03), counts
+
+
+def test_r1_room_is_checked_and_runs_stored_before_it_choose_without_it() -> None:
+    with pytest.raises(PlanInputError, match=r"r1_room must be a number of links in \[0, 21\], got -1"):
+        planner_options({"r1_room": -1.0})
+    stored = PlannerOptions(r1_room=8.0).to_dict()
+    del stored["r1_room"]
+    assert PlannerOptions.from_dict(stored).r1_room == 0.0

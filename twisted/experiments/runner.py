@@ -396,9 +396,10 @@ RESULT_OPTIONS = (
     "retry_weight",
     "state_prior",
     "cross_move",
+    "r1_room",
 )
 # options added after evaluations were stored, with the value those evaluations ran with
-ADDED_OPTIONS = {"cross_move": 0.0}
+ADDED_OPTIONS = {"cross_move": 0.0, "r1_room": 0.0}
 
 
 def _shown(stored: Any) -> str:

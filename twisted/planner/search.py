@@ -80,6 +80,10 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
+# the least node weight r1_room gives (a curl on a segment of a link or less almost never works)
+R1_ROOM_FLOOR = 0.02
+# links of the rope (twisted.sim.N_LINKS; the planner does not import the simulator)
+N_LINKS = 21
 
 
 def pair_key(node_index: int, next_state_key: str) -> str:
@@ -112,6 +116,9 @@ class PlannerOptions:
     # share of the K curves of a plan step toward a Cross move that come from the scripted Cross move
     # curve (twisted.proposals) instead of the inverse model; planner "twisted" only (DESIGN 8)
     cross_move: float = 0.0
+    # an R1 curl needs rope to curl: a node whose segment for the plan's R1 step is shorter than this
+    # many links gets node weight (length / r1_room)**2 (at least R1_ROOM_FLOOR); 0: off (DESIGN 8)
+    r1_room: float = 0.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
@@ -135,6 +142,8 @@ class PlannerOptions:
             raise ValueError(f"state_prior must be a finite number of tries >= 0, got {self.state_prior}")
         if not 0.0 <= self.cross_move <= 1.0:
             raise ValueError(f"cross_move must lie in [0, 1], got {self.cross_move}")
+        if not 0.0 <= self.r1_room <= N_LINKS:
+            raise ValueError(f"r1_room must be a number of links in [0, {N_LINKS}], got {self.r1_room}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -149,6 +158,7 @@ class PlannerOptions:
             "retry_weight": self.retry_weight,
             "state_prior": self.state_prior,
             "cross_move": self.cross_move,
+            "r1_room": self.r1_room,
             "tighten": self.tighten,
         }
 
@@ -156,9 +166,9 @@ class PlannerOptions:
     def from_dict(cls, data: dict[str, Any]) -> PlannerOptions:
         """The options a run stored; a run stored before ``retry_weight``, ``state_prior`` or
         ``cross_move`` existed chose its nodes uniformly, its states by the paper's crs and all its
-        curves from its sampler."""
+        curves from its sampler; one stored before ``r1_room`` chose nodes without it."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "cross_move": 0.0, **known})
+        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "cross_move": 0.0, "r1_room": 0.0, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
@@ -374,6 +384,7 @@ class Twisted:
                 self.goal_node = tree.nodes[index]
                 break
 
+        self._bounds: dict[int, Any] = {}  # node index -> segment_bounds of its points (r1_room)
         self._saved = len(tree)  # nodes already in the store
         self._t0: float | None = None  # set while run() is searching
         self._last_save = time.perf_counter()
@@ -480,6 +491,8 @@ class Twisted:
         self.tree.truncate(committed)
         for key in [key for key in self.plans if key not in self.tree.states]:
             del self.plans[key]
+        for index in [index for index in self._bounds if index >= committed]:
+            del self._bounds[index]
         self.rng.bit_generator.state = self._boundary.rng_state
         self.iteration = self._boundary.iteration
         self.sim_calls = self._boundary.sim_calls
@@ -493,7 +506,7 @@ class Twisted:
             self.random_expand()
             return
         plan_index, plan = self.select_plan(s)
-        node = self.select_configuration(s, plan.states[1])
+        node = self.select_configuration(s, plan.states[1], plan.moves[0])
         steps_done = self.follow_plan(node, plan)
         self.learn(s, plan_index, steps_done / len(plan.moves))
         if self.goal_node is None and self.rng.random() < self.options.p_expand:
@@ -571,9 +584,10 @@ class Twisted:
                 best, best_score = index, score
         return best, plans[best]
 
-    def select_configuration(self, s: str, next_state: PData) -> Node:
+    def select_configuration(self, s: str, next_state: PData, move: Any = None) -> Node:
         """A node of ``T`` in state ``s`` to ask for ``next_state``: weight ``retry_weight ** n`` for a
-        node already asked for it ``n`` times.
+        node already asked for it ``n`` times; with ``r1_room`` and an R1 ``move``, times the node's
+        room for the curl (:meth:`r1_room_weight`).
 
         A plan step succeeds or fails by its (node, next state) pair far more than by the curves
         drawn (DESIGN 8), so among the configurations of one state the untried ones go first. While
@@ -583,10 +597,26 @@ class Twisted:
         indices = self.tree.by_state[s]
         pairs, key = self.stats["pair"], next_state.key
         weights = [self.options.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
+        if self.options.r1_room > 0.0 and move is not None and move.kind == "R1":
+            nodes = self.tree.nodes
+            weights = [
+                w * self.r1_room_weight(nodes[i], move.segment) for w, i in zip(weights, indices, strict=True)
+            ]
         if min(weights) == max(weights):
             return self.tree.nodes[indices[int(self.rng.integers(len(indices)))]]
         p = np.array(weights) / sum(weights)
         return self.tree.nodes[indices[int(self.rng.choice(len(indices), p=p))]]
+
+    def r1_room_weight(self, node: Node, segment: int) -> float:
+        """How much rope ``node`` has on ``segment`` for a curl, as a node weight:
+        ``(length / r1_room) ** 2`` in links, between ``R1_ROOM_FLOOR`` and 1 (DESIGN 8)."""
+        bounds = self._bounds.get(node.index)
+        if bounds is None:
+            from twisted.proposals import segment_bounds
+
+            bounds = self._bounds[node.index] = segment_bounds(node.points)
+        length = float(bounds[segment + 1] - bounds[segment])
+        return max(R1_ROOM_FLOOR, min(1.0, length / self.options.r1_room) ** 2)
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
         """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
