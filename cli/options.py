@@ -17,6 +17,7 @@ import typer
 from cli.app import MAX_SEED, shorten
 from twisted.model.config import DEVICES, LINK_HEADS, SOURCES, NetConfig, TrainConfig
 from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions
+from twisted.planner.search import N_LINKS
 
 MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
 
@@ -204,8 +205,8 @@ def cross_move_option() -> Any:
 
 
 def _check_r1_room(links: float | None) -> float | None:
-    if links is not None and not 0.0 <= links <= 21:  # NaN fails both comparisons
-        raise _bad(f"--r1-room {links}: must be a number of links in [0, 21]")
+    if links is not None and not 0.0 <= links <= N_LINKS:  # NaN fails both comparisons
+        raise _bad(f"--r1-room {links}: must be a number of links in [0, {N_LINKS}]")
     return links
 
 

@@ -17,6 +17,7 @@ import pytest
 from twisted.goals import PlanInputError, check_goal
 from twisted.moves import Move, plans, successors
 from twisted.planner import Node, PlannerOptions, SearchTree, Twisted, planner_options
+from twisted.planner.search import N_LINKS as SEARCH_N_LINKS
 from twisted.planner.search import R1_ROOM_FLOOR
 from twisted.proposals import across_curve, cross_move_curve, segment_bounds
 from twisted.sim import N_LINKS, Curve, RopeSim, sample_curve
@@ -232,3 +233,4 @@ def test_r1_room_is_checked_and_runs_stored_before_it_choose_without_it() -> Non
     stored = PlannerOptions(r1_room=8.0).to_dict()
     del stored["r1_room"]
     assert PlannerOptions.from_dict(stored).r1_room == 0.0
+    assert SEARCH_N_LINKS == N_LINKS  # the planner's copy of the rope's link count

@@ -82,7 +82,8 @@ STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 # the least node weight r1_room gives (a curl on a segment of a link or less almost never works)
 R1_ROOM_FLOOR = 0.02
-# links of the rope (twisted.sim.N_LINKS; the planner does not import the simulator)
+# links of the rope: twisted.sim.N_LINKS, repeated so that importing the planner does not load MuJoCo
+# (tests/test_cross_move.py checks that they agree)
 N_LINKS = 21
 
 
