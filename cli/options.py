@@ -151,74 +151,69 @@ def k_expand_option() -> Any:
     )
 
 
-def _check_retry_weight(weight: float | None) -> float | None:
-    if weight is not None and not 0.0 < weight <= 1.0:
-        raise _bad(f"--retry-weight {weight}: must lie in (0, 1]")
-    return weight
+def _bounded_option(
+    flag: str, low: float, high: float, must: str, help: str, *, low_open: bool = False
+) -> Any:
+    """A float option of the commands that run the planner (None: the PlannerOptions default) whose
+    callback refuses a value outside ``[low, high]`` (``(low, high]`` with ``low_open``), NaN
+    included, saying it ``must`` be what the text names (click's ranges let NaN through)."""
+
+    def check(value: float | None) -> float | None:
+        if value is not None and not ((low < value if low_open else low <= value) and value <= high):
+            raise _bad(f"{flag} {value}: must {must}")
+        return value
+
+    return typer.Option(None, flag, callback=check, help=help)
 
 
 def retry_weight_option() -> Any:
     """``--retry-weight`` of the commands that run the planner; None: PlannerOptions.retry_weight."""
-    return typer.Option(
-        None,
+    return _bounded_option(
         "--retry-weight",
-        callback=_check_retry_weight,
-        help="Node choice: weight retry_weight**n for a node already asked n times for the plan's next "
+        0.0,
+        1.0,
+        "lie in (0, 1]",
+        "Node choice: weight retry_weight**n for a node already asked n times for the plan's next "
         f"state (1: the paper's uniform choice; default {PlannerOptions.retry_weight}).",
+        low_open=True,
     )
-
-
-def _check_state_prior(tries: float | None) -> float | None:
-    if tries is not None and not 0.0 <= tries <= 1e6:  # NaN fails both comparisons
-        raise _bad(f"--state-prior {tries}: must be a number of tries in [0, 1e6]")
-    return tries
 
 
 def state_prior_option() -> Any:
     """``--state-prior`` of the commands that run the planner; None: PlannerOptions.state_prior."""
-    return typer.Option(
-        None,
+    return _bounded_option(
         "--state-prior",
-        callback=_check_state_prior,
-        help="State choice (crs): weight (1 + Cross(s)) * r(s), r(s) how the plan steps tried from s fare "
+        0.0,
+        1e6,
+        "be a number of tries in [0, 1e6]",
+        "State choice (crs): weight (1 + Cross(s)) * r(s), r(s) how the plan steps tried from s fare "
         "against its crossing level, shrunk by this many tries (0: the paper's crs; default "
         f"{PlannerOptions.state_prior:g}).",
     )
 
 
-def _check_cross_move(share: float | None) -> float | None:
-    if share is not None and not 0.0 <= share <= 1.0:  # NaN fails both comparisons
-        raise _bad(f"--cross-move {share}: must be a share of the K curves in [0, 1]")
-    return share
-
-
 def cross_move_option() -> Any:
     """``--cross-move`` of the commands that run the planner; None: PlannerOptions.cross_move."""
-    return typer.Option(
-        None,
+    return _bounded_option(
         "--cross-move",
-        callback=_check_cross_move,
-        help="Share of the K curves of a plan step toward a Cross move that are scripted (the tip, or "
+        0.0,
+        1.0,
+        "be a share of the K curves in [0, 1]",
+        "Share of the K curves of a plan step toward a Cross move that are scripted (the tip, or "
         "the crossed strand, carried across; planner twisted) instead of drawn from the model "
         f"(0: all from the model; default {PlannerOptions.cross_move:g}).",
     )
 
 
-def _check_r1_room(links: float | None) -> float | None:
-    if links is not None and not 0.0 <= links <= N_LINKS:  # NaN fails both comparisons
-        raise _bad(f"--r1-room {links}: must be a number of links in [0, {N_LINKS}]")
-    return links
-
-
 def r1_room_option() -> Any:
     """``--r1-room`` of the commands that run the planner; None: PlannerOptions.r1_room."""
-    return typer.Option(
-        None,
+    return _bounded_option(
         "--r1-room",
-        callback=_check_r1_room,
-        help="Node choice for an R1 step: a node whose segment for the curl is shorter than this many "
-        "links gets weight (length / r1_room)^2 (0: off; default "
-        f"{PlannerOptions.r1_room:g}).",
+        0.0,
+        N_LINKS,
+        f"be a number of links in [0, {N_LINKS}]",
+        "Node choice for an R1 step: a node whose segment for the curl is shorter than this many "
+        f"links gets weight (length / r1_room)^2 (0: off; default {PlannerOptions.r1_room:g}).",
     )
 
 
