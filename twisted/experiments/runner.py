@@ -398,8 +398,10 @@ RESULT_OPTIONS = (
     "cross_move",
     "r1_room",
 )
-# options added after evaluations were stored, with the value those evaluations ran with
-ADDED_OPTIONS = {"cross_move": 0.0, "r1_room": 0.0}
+# options added after evaluations stored every option's value: one missing from an evaluation ran with
+# the planner's OPTIONS_BEFORE value (one missing from an older evaluation, like state_prior, was the
+# default of its day: unknown)
+ADDED_OPTIONS = ("cross_move", "r1_room")
 
 
 def _shown(stored: Any) -> str:
@@ -418,9 +420,12 @@ def _check_label_options(
     here = (EvalResult.set_id == record.id) & (EvalResult.planner == label)
     runs = select(EvalResult.eval_run_id).where(here)
     q = select(EvalRun.parameters).where(EvalRun.id.in_(runs))  # no DISTINCT: PostgreSQL's json has no "="
+    from twisted.planner.search import OPTIONS_BEFORE
+
     ours = {key: options.get(key) for key in RESULT_OPTIONS}
+    added = {key: OPTIONS_BEFORE[key] for key in ADDED_OPTIONS}
     for (parameters,) in session.execute(q):
-        theirs = {key: (parameters or {}).get(key, ADDED_OPTIONS.get(key)) for key in RESULT_OPTIONS}
+        theirs = {key: (parameters or {}).get(key, added.get(key)) for key in RESULT_OPTIONS}
         differ = [
             f"{key} {_shown(theirs[key])} (now {ours[key]})"
             for key in RESULT_OPTIONS

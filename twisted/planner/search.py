@@ -80,6 +80,8 @@ HEURISTICS = ("rnd", "crs", "ucb")
 # that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
+# what a run stored before an option existed ran with (PlannerOptions.from_dict)
+OPTIONS_BEFORE = {"retry_weight": 1.0, "state_prior": 0.0, "cross_move": 0.0, "r1_room": 0.0}
 # the least node weight r1_room gives (a curl on a segment of a link or less almost never works)
 R1_ROOM_FLOOR = 0.02
 # links of the rope: twisted.sim.N_LINKS, repeated so that importing the planner does not load MuJoCo
@@ -169,7 +171,7 @@ class PlannerOptions:
         ``cross_move`` existed chose its nodes uniformly, its states by the paper's crs and all its
         curves from its sampler; one stored before ``r1_room`` chose nodes without it."""
         known = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
-        return cls(**{"retry_weight": 1.0, "state_prior": 0.0, "cross_move": 0.0, "r1_room": 0.0, **known})
+        return cls(**{**OPTIONS_BEFORE, **known})
 
 
 # --- the tree T -------------------------------------------------------------------------------------
