@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections import Counter
 from functools import cache
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -225,6 +226,52 @@ def test_an_r1_step_goes_to_the_nodes_with_room_for_the_curl() -> None:
         search.select_configuration(node.p_data.key, cross[0], cross[1]).index for _ in range(3000)
     )
     assert counts[0] / 3000 == pytest.approx(0.5, abs=0.03), counts
+
+
+def test_plans_and_states_go_where_some_node_has_room_for_the_curl() -> None:
+    """A state whose plans start with an R1 curl on segment 1 (2 links in its one node) or a Cross
+    move: the curl's plan, and the state for it, weigh (2/8)**2; a second node with room lifts both."""
+    search, _ = _search("twisted", 0.0)
+    node = search.tree.nodes[0]
+    key = node.p_data.key
+    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
+    cross = _cross_moves(node.p_data)[0]
+    curl_plan = SimpleNamespace(states=[node.p_data, r1.state], moves=[r1.move])
+    cross_plan = SimpleNamespace(states=[node.p_data, cross[0]], moves=[cross[1]])
+    search.plans = {key: [curl_plan, cross_plan]}
+    search._bounds = {0: np.array([0.0, 5.0, 7.0, 15.0, 21.0])}
+    picks = Counter(search.select_plan(key)[0] for _ in range(3000))
+    assert picks[0] / 3000 == pytest.approx(0.5, abs=0.03)  # off: uniform
+    search.options = PlannerOptions(r1_room=8.0)
+    assert search.plan_rooms(key) == pytest.approx([(2 / 8) ** 2, 1.0])
+    picks = Counter(search.select_plan(key)[0] for _ in range(3000))
+    assert picks[0] / 3000 == pytest.approx((2 / 8) ** 2 / ((2 / 8) ** 2 + 1.0), abs=0.02), picks
+    search.plans = {key: [curl_plan]}  # the state's weight is its best plan's room
+    search._plan_rooms.clear()
+    assert search.plan_rooms(key) == pytest.approx([(2 / 8) ** 2])
+    search.tree.add(Node(1, 0, node.q, node.points, node.p_data, None, 0, 0))
+    search._bounds[1] = np.array([0.0, 5.0, 13.0, 15.0, 21.0])
+    assert search.plan_rooms(key) == [1.0]  # the cache follows the state's nodes
+
+
+def test_a_state_whose_nodes_leave_no_room_for_its_curls_is_chosen_less() -> None:
+    search, _ = _search("twisted", 0.0)
+    node = search.tree.nodes[0]
+    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
+    cross = _cross_moves(r1.state)[0]
+    search.tree.add(Node(1, 0, node.q, node.points, r1.state, None, 0, 0))
+    a, b = node.p_data, r1.state
+    search.plans = {
+        a.key: [SimpleNamespace(states=[a, r1.state], moves=[r1.move])],
+        b.key: [SimpleNamespace(states=[b, cross[0]], moves=[cross[1]])],
+    }
+    search._bounds = {0: np.array([0.0, 5.0, 7.0, 15.0, 21.0])}  # segment 1 of a: 2 links
+    weights = {a.key: 1.0 + a.cross, b.key: 1.0 + b.cross}
+    for room, r1_room in ((1.0, 0.0), ((2 / 8) ** 2, 8.0)):
+        search.options = PlannerOptions(r1_room=r1_room)
+        picks = Counter(search.select_topological_state() for _ in range(3000))
+        share = weights[a.key] * room / (weights[a.key] * room + weights[b.key])
+        assert picks[a.key] / 3000 == pytest.approx(share, abs=0.025), (r1_room, picks)
 
 
 def test_r1_room_is_checked_and_runs_stored_before_it_choose_without_it() -> None:

@@ -14,8 +14,9 @@ until the goal state appears in ``T`` or the time runs out. The answer is the pa
 the root of ``T`` to the goal node. Where this differs from the paper (DESIGN 8): the node choice
 weights a node by how often it was already asked for the plan's next state (the retry weight; the
 paper's choice is uniform); only when asked for (``state_prior > 0``), ``r(s)`` is how the plan
-steps started from ``s`` fared against those of its crossing level (the paper's crs has 1); and with
-``cross_move > 0`` a step toward a Cross move takes that share of its K curves from a scripted curve
+steps started from ``s`` fared against those of its crossing level (the paper's crs has 1); with
+``r1_room > 0`` states, plans and nodes are weighted by the rope they leave for a plan's R1 curl;
+and with ``cross_move > 0`` a step toward a Cross move takes that share of its K curves from a scripted curve
 (:func:`twisted.proposals.cross_move_curve`) instead of the inverse model.
 
 Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
@@ -120,7 +121,8 @@ class PlannerOptions:
     # curve (twisted.proposals) instead of the inverse model; planner "twisted" only (DESIGN 8)
     cross_move: float = 0.0
     # an R1 curl needs rope to curl: a node whose segment for the plan's R1 step is shorter than this
-    # many links gets node weight (length / r1_room)**2 (at least R1_ROOM_FLOOR); 0: off (DESIGN 8)
+    # many links gets node weight (length / r1_room)**2 (at least R1_ROOM_FLOOR), and a plan that starts
+    # with a curl, and a state (crs), the weight of the best node for it; 0: off (DESIGN 8)
     r1_room: float = 0.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
@@ -388,6 +390,7 @@ class Twisted:
                 break
 
         self._bounds: dict[int, Any] = {}  # node index -> segment_bounds of its points (r1_room)
+        self._plan_rooms: dict[str, tuple[int, list[float]]] = {}  # state -> (its nodes, plan_rooms)
         self._saved = len(tree)  # nodes already in the store
         self._t0: float | None = None  # set while run() is searching
         self._last_save = time.perf_counter()
@@ -496,6 +499,7 @@ class Twisted:
             del self.plans[key]
         for index in [index for index in self._bounds if index >= committed]:
             del self._bounds[index]
+        self._plan_rooms.clear()
         self.rng.bit_generator.state = self._boundary.rng_state
         self.iteration = self._boundary.iteration
         self.sim_calls = self._boundary.sim_calls
@@ -518,7 +522,8 @@ class Twisted:
     # -- SelectTopologicalState / SelectPlan / SelectConfiguration -------------------------------------
 
     def select_topological_state(self) -> str | None:
-        """A reached state with a plan: rnd uniform, crs weight 1 + Cross(s), ucb upper confidence bound."""
+        """A reached state with a plan: rnd uniform, crs weight 1 + Cross(s) (with ``r1_room``, times
+        its best plan's room, :meth:`plan_rooms`), ucb upper confidence bound."""
         candidates = self.candidate_states
         if not candidates:
             return None
@@ -528,6 +533,8 @@ class Twisted:
             weights = np.array([1.0 + self.tree.states[key].cross for key in candidates])
             if self.options.state_prior > 0.0:
                 weights = weights * self.step_ratios(candidates)
+            if self.options.r1_room > 0.0:
+                weights = weights * np.array([max(self.plan_rooms(key)) for key in candidates])
             return candidates[int(self.rng.choice(len(candidates), p=weights / weights.sum()))]
         return self._ucb_state(candidates)
 
@@ -571,10 +578,15 @@ class Twisted:
         return best
 
     def select_plan(self, s: str) -> tuple[int, Any]:
-        """A high-level plan from ``s``: uniform (rnd, crs) or upper confidence bound (ucb)."""
+        """A high-level plan from ``s``: uniform (rnd, crs; with ``r1_room``, weighted by
+        :meth:`plan_rooms`) or upper confidence bound (ucb)."""
         plans = self.plans[s]
         if self.options.heuristic != "ucb":
-            index = int(self.rng.integers(len(plans)))
+            rooms = self.plan_rooms(s) if self.options.r1_room > 0.0 else [1.0]
+            if min(rooms) == max(rooms):
+                index = int(self.rng.integers(len(plans)))
+            else:
+                index = int(self.rng.choice(len(plans), p=np.array(rooms) / sum(rooms)))
             return index, plans[index]
         n_state = self.stats["state"].get(s, [0.0, 0.0])[0]
         best, best_score = 0, -math.inf
@@ -620,6 +632,26 @@ class Twisted:
             bounds = self._bounds[node.index] = segment_bounds(node.points)
         length = float(bounds[segment + 1] - bounds[segment])
         return max(R1_ROOM_FLOOR, min(1.0, length / self.options.r1_room) ** 2)
+
+    def plan_rooms(self, s: str) -> list[float]:
+        """Per plan of ``s``: 1, or for a plan that starts with an R1 curl the most room any node of
+        ``s`` has for it (:meth:`r1_room_weight`); cached until ``s`` gains a node."""
+        indices = self.tree.by_state[s]
+        cached = self._plan_rooms.get(s)
+        if cached is not None and cached[0] == len(indices):
+            return cached[1]
+        nodes, best = self.tree.nodes, {}
+        rooms = []
+        for plan in self.plans[s]:
+            move = plan.moves[0]
+            if move.kind != "R1":
+                rooms.append(1.0)
+                continue
+            if move.segment not in best:
+                best[move.segment] = max(self.r1_room_weight(nodes[i], move.segment) for i in indices)
+            rooms.append(best[move.segment])
+        self._plan_rooms[s] = (len(indices), rooms)
+        return rooms
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
         """Record how far a followed plan got (the ucb heuristic learns from it; all keep it for analysis)."""
