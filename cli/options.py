@@ -212,8 +212,9 @@ def r1_room_option() -> Any:
         0.0,
         N_LINKS,
         f"be a number of links in [0, {N_LINKS}]",
-        "Node choice for an R1 step: a node whose segment for the curl is shorter than this many "
-        f"links gets weight (length / r1_room)^2 (0: off; default {PlannerOptions.r1_room:g}).",
+        "Room for R1 curls: a node whose segment for the curl is shorter than this many links gets "
+        "weight (length / r1_room)^2, and a plan that starts with a curl, and its state, the weight "
+        f"of the best node for it (0: off; default {PlannerOptions.r1_room:g}).",
     )
 
 

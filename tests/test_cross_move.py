@@ -152,7 +152,7 @@ def _search(planner: str, share: float, n: int = 1) -> tuple[Twisted, _CountingS
     tree.add(Node(0, None, state, points, p, None, 0, 0))
     goal = check_goal(_cross_moves(p)[0][0].to_json())
     sampler = _CountingSampler()
-    options = PlannerOptions(planner=planner, k=3, cross_move=share, seed=1)
+    options = PlannerOptions(planner=planner, k=3, cross_move=share, r1_room=0.0, seed=1)
     search = Twisted(
         goal, tree, options, pool=None, high_level=lambda s: plans(s, goal, 100), sampler=sampler
     )  # type: ignore[arg-type]

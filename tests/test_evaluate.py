@@ -29,6 +29,7 @@ from twisted.experiments.report import load_results, success_curve, write_report
 from twisted.experiments.runner import EvalOptions, run_eval
 from twisted.goals import state_goal
 from twisted.moves import enumerate_states, successors
+from twisted.planner import PlannerOptions
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, EvalRun, ProblemRecord, load_problem_set, save_problem_set
 from twisted.store.models import Configuration, Run, TopologicalState, Transition, array_to_blob
@@ -483,21 +484,23 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
         assert (plan_run.parameters["k"], plan_run.parameters["p_expand"]) == (2, 0.5)
         assert plan_run.parameters["retry_weight"] == 1.0
 
-    # results stored before --cross-move existed ran without scripted curves: they count as 0
+    # results stored before --cross-move existed ran without scripted curves: they count as 0, so
+    # an evaluation that asks for 0 reuses them and one with today's default does not
     with open_store(sqlite_url) as store, store.session(write=True) as session:
         for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x")):
-            assert run.parameters["cross_move"] == 0.0
+            assert run.parameters["cross_move"] == PlannerOptions().cross_move
             run.parameters = {k: v for k, v in run.parameters.items() if k != "cross_move"}
-    before = runner.invoke(app, [*args, "--label", "x"])
+    before = runner.invoke(app, [*args, "--label", "x", "--cross-move", "0"])
     assert before.exit_code == 0 and "1 finished before" in " ".join(before.output.split()), before.output
-    scripted = runner.invoke(app, [*args, "--label", "x", "--cross-move", "0.5"])
-    assert scripted.exit_code == 2 and "cross_move 0.0 (now 0.5)" in " ".join(scripted.output.split())
+    scripted = runner.invoke(app, [*args, "--label", "x"])
+    message = " ".join(scripted.output.split())
+    assert scripted.exit_code == 2 and f"cross_move 0.0 (now {PlannerOptions().cross_move})" in message
 
     # results stored before the defaults were stored as values (the option left out) are not reused
     # by an evaluation with today's defaults, whose values may differ from those of their day
     with open_store(sqlite_url) as store, store.session(write=True) as session:
         for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x")):
             run.parameters = {k: v for k, v in run.parameters.items() if k != "state_prior"}
-    old = runner.invoke(app, [*args, "--label", "x"])
+    old = runner.invoke(app, [*args, "--label", "x", "--cross-move", "0"])
     assert old.exit_code == 2, old.output
     assert "state_prior unrecorded (the default of its day) (now 0.0)" in " ".join(old.output.split())

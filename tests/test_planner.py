@@ -165,6 +165,8 @@ def _search_with_states(states: list[str], heuristic: str, goal: str, **options:
         p = parse_p_data(state)
         tree.add(Node(i, None if i == 0 else 0, q, points, p, None, 0, 0))
     g = check_goal(goal)
+    # every node has the straight rope's points whatever its state: no room for a curl can be read
+    options.setdefault("r1_room", 0.0)
     options = PlannerOptions(heuristic=heuristic, seed=7, **options)
     return Twisted(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
 

@@ -15,9 +15,10 @@ the root of ``T`` to the goal node. Where this differs from the paper (DESIGN 8)
 weights a node by how often it was already asked for the plan's next state (the retry weight; the
 paper's choice is uniform); only when asked for (``state_prior > 0``), ``r(s)`` is how the plan
 steps started from ``s`` fared against those of its crossing level (the paper's crs has 1); with
-``r1_room > 0`` states, plans and nodes are weighted by the rope they leave for a plan's R1 curl;
-and with ``cross_move > 0`` a step toward a Cross move takes that share of its K curves from a scripted curve
-(:func:`twisted.proposals.cross_move_curve`) instead of the inverse model.
+``r1_room > 0`` (default 8) states, plans and nodes are weighted by the rope they leave for a
+plan's R1 curl; with ``cross_move > 0`` (default 0.67) a step toward a Cross move takes that share
+of its K curves from a scripted curve (:func:`twisted.proposals.cross_move_curve`) instead of the
+inverse model; and RandomExpand follows a failed iteration with p = 0.01 (the paper's 0.05).
 
 Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
 the same high-level plans with uniformly random curves (the paper's "low+high level");
@@ -98,13 +99,14 @@ def pair_key(node_index: int, next_state_key: str) -> str:
 
 @dataclass(frozen=True)
 class PlannerOptions:
-    """Algorithm options; the defaults are the paper's values except ``k``, ``k_expand`` and
-    ``retry_weight``, which measured searches set (DESIGN 8)."""
+    """Algorithm options; the defaults are the paper's values except ``k``, ``p_expand``,
+    ``k_expand``, ``retry_weight``, ``cross_move`` and ``r1_room``, which measured searches set
+    (DESIGN 8)."""
 
     planner: str = "twisted"
     heuristic: str = "crs"
     k: int = 3  # curves sampled per plan step (K; the paper's 6 is --k 6)
-    p_expand: float = 0.05  # probability of RandomExpand after a failed iteration (p)
+    p_expand: float = 0.01  # probability of RandomExpand after a failed iteration (p; the paper's 0.05)
     k_expand: int = 25  # random curves per RandomExpand (k; the paper's 100 is --k-expand 100)
     plan_limit: int = 100  # high-level plans kept per reached state
     seed: int = 0
@@ -119,11 +121,11 @@ class PlannerOptions:
     state_prior: float = 0.0
     # share of the K curves of a plan step toward a Cross move that come from the scripted Cross move
     # curve (twisted.proposals) instead of the inverse model; planner "twisted" only (DESIGN 8)
-    cross_move: float = 0.0
+    cross_move: float = 0.67
     # an R1 curl needs rope to curl: a node whose segment for the plan's R1 step is shorter than this
     # many links gets node weight (length / r1_room)**2 (at least R1_ROOM_FLOOR), and a plan that starts
     # with a curl, and a state (crs), the weight of the best node for it; 0: off (DESIGN 8)
-    r1_room: float = 0.0
+    r1_room: float = 8.0
     # success means "reached a goal state and the pull test ties the goal's knot" (twisted.tighten)
     tighten: bool = False
 
