@@ -21,8 +21,10 @@ runner = CliRunner()
 
 
 def test_sac_planner_needs_a_policy_then_plans_with_it(sqlite_url: str) -> None:
+    # the set-up counts toward --timeout, and loading stable-baselines3 on a busy machine can take more
+    # than a second: a short timeout could end the set-up (exit 3) before the missing policy is found
     code = runner.invoke(
-        app, ["--db", sqlite_url, "plan", "--goal", ONE, "--planner", "sac", "--timeout", "1"]
+        app, ["--db", sqlite_url, "plan", "--goal", ONE, "--planner", "sac", "--timeout", "120"]
     )
     assert code.exit_code == 2 and "twisted rl train" in code.output
 
