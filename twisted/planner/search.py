@@ -392,7 +392,8 @@ class Twisted:
                 break
 
         self._bounds: dict[int, Any] = {}  # node index -> segment_bounds of its points (r1_room)
-        self._plan_rooms: dict[str, tuple[int, list[float]]] = {}  # state -> (its nodes, plan_rooms)
+        # state -> (its nodes weighed, best room per R1 segment, plan_rooms)
+        self._plan_rooms: dict[str, tuple[int, dict[int, float], list[float]]] = {}
         self._saved = len(tree)  # nodes already in the store
         self._t0: float | None = None  # set while run() is searching
         self._last_save = time.perf_counter()
@@ -637,12 +638,16 @@ class Twisted:
 
     def plan_rooms(self, s: str) -> list[float]:
         """Per plan of ``s``: 1, or for a plan that starts with an R1 curl the most room any node of
-        ``s`` has for it (:meth:`r1_room_weight`); cached until ``s`` gains a node."""
+        ``s`` has for it (:meth:`r1_room_weight`). The best room per segment is kept per state and
+        only the nodes ``s`` gained since the last call are weighed (the cache is dropped on rollback)."""
         indices = self.tree.by_state[s]
         cached = self._plan_rooms.get(s)
         if cached is not None and cached[0] == len(indices):
-            return cached[1]
-        nodes, best = self.tree.nodes, {}
+            return cached[2]
+        seen, best = (cached[0], cached[1]) if cached is not None else (0, {})
+        nodes, new = self.tree.nodes, indices[seen:]
+        for segment in best:
+            best[segment] = max(best[segment], *(self.r1_room_weight(nodes[i], segment) for i in new))
         rooms = []
         for plan in self.plans[s]:
             move = plan.moves[0]
@@ -652,7 +657,7 @@ class Twisted:
             if move.segment not in best:
                 best[move.segment] = max(self.r1_room_weight(nodes[i], move.segment) for i in indices)
             rooms.append(best[move.segment])
-        self._plan_rooms[s] = (len(indices), rooms)
+        self._plan_rooms[s] = (len(indices), best, rooms)
         return rooms
 
     def learn(self, s: str, plan_index: int, reward: float) -> None:
