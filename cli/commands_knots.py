@@ -70,7 +70,7 @@ def list_command(
     in that state)."""
     from rich.progress import Progress
 
-    from twisted.knots import CATALOGUE, MAX_BUILT_CROSSINGS, crossing_number, states_tying
+    from twisted.knots import CATALOGUE, COMPOSITE_NOTE, MAX_BUILT_CROSSINGS, crossing_number, states_tying
 
     # 5 crossings enumerate 130,304 states (~1 min); 6 would take many minutes and gigabytes
     if crossings is not None and not 0 <= crossings <= MAX_BUILT_CROSSINGS:
@@ -122,7 +122,8 @@ def list_command(
         return
 
     summary = Table(
-        title="Named knots: states whose closures under AND over the table are the knot (knotoids excluded)"
+        title="Named knots: states whose closures under AND over the table are the knot (knotoids excluded)",
+        caption=f"Note: {COMPOSITE_NOTE} (docs/goals.md).",
     )
     for column in ("name", "type", "Alexander", "det", "Jones", "crossings", "states", "visited", "configs"):
         summary.add_column(column, justify="right" if column in ("det", "crossings", "states") else "left")

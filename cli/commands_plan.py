@@ -61,7 +61,9 @@ def plan_command(
         None,
         "--knot",
         help="Goal by knot name (overhand, figure-eight, 5_1, 5_2, granny, square; see `twisted knots "
-        "list`): any rope state that really ties it (both closures are the knot; knotoids never are).",
+        "list`): any rope state that really ties it (both closures are the knot; knotoids never are). "
+        "Granny and square are knot types (two trefoils summed), tied as two overhands in a row on the "
+        "one rope, not the sailor's reef knot joining two ends.",
     ),
     crossings: int | None = typer.Option(
         None,

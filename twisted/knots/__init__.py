@@ -64,6 +64,7 @@ Modules:
 
 from twisted.knots.catalogue import (
     CATALOGUE,
+    COMPOSITE_NOTE,
     KNOT_NAMES,
     UNKNOWN,
     KnotNameError,
@@ -86,6 +87,7 @@ from twisted.knots.states import (
 
 __all__ = [
     "CATALOGUE",
+    "COMPOSITE_NOTE",
     "KNOTOID",
     "KNOT_NAMES",
     "MAX_BUILT_CROSSINGS",

@@ -17,6 +17,7 @@ from twisted.knots.polynomials import _loop_poly, alexander_polynomial, jones_po
 
 __all__ = [
     "CATALOGUE",
+    "COMPOSITE_NOTE",
     "KNOT_NAMES",
     "UNKNOWN",
     "KnotNameError",
@@ -28,6 +29,13 @@ __all__ = [
 ]
 
 UNKNOWN = "unknown"
+
+# What "granny" and "square" mean here (shown by `twisted knots list`, `--knot` help and docs/goals.md).
+COMPOSITE_NOTE = (
+    "granny and square are knot types, connected sums of two trefoils (granny: two of the same "
+    "handedness, square: one of each), tied on the one open rope as two overhand knots in a row; not "
+    "the sailor's reef knot, which joins two rope ends"
+)
 
 
 @dataclass(frozen=True, slots=True)
