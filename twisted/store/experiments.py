@@ -44,7 +44,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import KNOT_PREFIX
-from twisted.store.models import Base, utcnow
+from twisted.store.models import Base, RunLifecycle, utcnow
 from twisted.topology import PData, parse_p_data
 
 __all__ = [
@@ -100,8 +100,8 @@ class Problem(Base):
     )
 
 
-class EvalRun(Base):
-    """One ``twisted eval`` invocation over a set."""
+class EvalRun(RunLifecycle, Base):
+    """One ``twisted eval`` invocation over a set (status, start, end, message: :class:`RunLifecycle`)."""
 
     __tablename__ = "eval_runs"
 
@@ -114,12 +114,8 @@ class EvalRun(Base):
     workers: Mapped[int] = mapped_column(Integer)  # simulator processes per planner
     parallel: Mapped[int] = mapped_column(Integer)  # planners run at once
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    status: Mapped[str] = mapped_column(String(16), default="running")  # running|finished|interrupted|failed
-    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     host: Mapped[str | None] = mapped_column(String(255))
     pid: Mapped[int | None] = mapped_column(Integer)
-    message: Mapped[str | None] = mapped_column(Text)
 
 
 class EvalResult(Base):
@@ -359,11 +355,8 @@ def start_eval_run(
 
 def end_eval_run(session: Session, eval_run_id: int, status: str, message: str | None = None) -> None:
     """Close an eval run (``finished``, ``interrupted`` or ``failed``)."""
-    session.execute(
-        update(EvalRun)
-        .where(EvalRun.id == eval_run_id)
-        .values(status=status, ended_at=utcnow(), message=message)
-    )
+    values = EvalRun.end_values(status, message)
+    session.execute(update(EvalRun).where(EvalRun.id == eval_run_id).values(values))
 
 
 def pid_alive(host: str | None, pid: int | None) -> bool:

@@ -29,7 +29,7 @@ from sqlalchemy import (
     String,
     Text,
 )
-from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy.orm import DeclarativeBase, Mapped, declared_attr, mapped_column
 
 # Deterministic constraint names: Alembic batch mode (SQLite) and PostgreSQL both need named constraints
 # to alter or drop them later.
@@ -41,6 +41,7 @@ NAMING_CONVENTION = {
     "pk": "pk_%(table_name)s",
 }
 
+# The status of every run table (runs, training_runs, rl_runs, eval_runs): see RunLifecycle.
 RUN_STATUSES = ("running", "finished", "interrupted", "failed")
 
 
@@ -67,7 +68,31 @@ class Base(DeclarativeBase):
     type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
 
 
-class Run(Base):
+class RunLifecycle:
+    """The columns every run table shares: ``status`` (in :data:`RUN_STATUSES`), start, end, message.
+
+    Mixed into ``runs``, ``training_runs``, ``rl_runs`` and ``eval_runs``. A table whose status is
+    indexed (its migration made one) sets ``status_indexed = True``. :meth:`end_values` are what
+    closing a run writes.
+    """
+
+    status_indexed = False
+
+    @declared_attr
+    def status(cls) -> Mapped[str]:
+        return mapped_column(String(16), default="running", index=cls.status_indexed)
+
+    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
+    message: Mapped[str | None] = mapped_column(Text)
+
+    @staticmethod
+    def end_values(status: str, message: str | None = None) -> dict[str, Any]:
+        """The column values of a run that ends now with ``status`` and ``message``."""
+        return {"status": status, "ended_at": utcnow(), "message": message}
+
+
+class Run(RunLifecycle, Base):
     """One invocation of a long job (``kind`` = "collect", "train", "plan", ...), with its counters."""
 
     __tablename__ = "runs"
@@ -76,9 +101,6 @@ class Run(Base):
     kind: Mapped[str] = mapped_column(String(32), index=True)
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     seed: Mapped[int | None] = mapped_column(BigInteger)
-    status: Mapped[str] = mapped_column(String(16), default="running")
-    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
     # Counters, updated in the same transaction as the rows they count (so they survive a SIGKILL).
     tried: Mapped[int] = mapped_column(Integer, default=0)
     kept: Mapped[int] = mapped_column(Integer, default=0)
@@ -87,7 +109,6 @@ class Run(Base):
     sim_seconds: Mapped[float] = mapped_column(Float, default=0.0)
     host: Mapped[str | None] = mapped_column(String(255))
     pid: Mapped[int | None] = mapped_column(Integer)
-    message: Mapped[str | None] = mapped_column(Text)
 
 
 class TopologicalState(Base):

@@ -66,7 +66,7 @@ def end_run(
     session: Session, run_id: int, status: str, message: str | None = None, wall_seconds: float | None = None
 ) -> None:
     """Set a run's final status (``finished``, ``interrupted`` or ``failed``) and end time."""
-    values: dict[str, Any] = {"status": status, "ended_at": utcnow(), "message": message}
+    values = Run.end_values(status, message)
     if wall_seconds is not None:
         values["wall_seconds"] = wall_seconds
     session.execute(update(Run).where(Run.id == run_id).values(**values))

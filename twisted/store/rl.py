@@ -25,17 +25,14 @@ from sqlalchemy import (
     ForeignKey,
     Integer,
     LargeBinary,
-    String,
-    Text,
     select,
     update,
 )
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
-from twisted.store.models import Base, utcnow
+from twisted.store.models import Base, RunLifecycle, utcnow
 
 __all__ = [
-    "RL_STATUSES",
     "RlCheckpoint",
     "RlCheckpointInfo",
     "RlRun",
@@ -46,16 +43,13 @@ __all__ = [
     "success_table",
 ]
 
-RL_STATUSES = ("running", "finished", "interrupted", "failed")
-
-
-class RlRun(Base):
-    """One SAC+HER training run (``status`` in :data:`RL_STATUSES`)."""
+class RlRun(RunLifecycle, Base):
+    """One SAC+HER training run (status, start, end, message: :class:`RunLifecycle`)."""
 
     __tablename__ = "rl_runs"
+    status_indexed = True
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    status: Mapped[str] = mapped_column(String(16), default="running", index=True)
     seed: Mapped[int] = mapped_column(BigInteger)
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)  # goal source, SAC/HER settings
     total_steps: Mapped[int] = mapped_column(Integer)  # environment steps asked for
@@ -63,10 +57,7 @@ class RlRun(Base):
     episodes: Mapped[int] = mapped_column(Integer, default=0)
     elapsed_s: Mapped[float] = mapped_column(Float, default=0.0)
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
-    message: Mapped[str | None] = mapped_column(Text)
 
 
 class RlCheckpoint(Base):

@@ -15,21 +15,19 @@ import datetime as dt
 import math
 from typing import Any
 
-from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String, Text
+from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String
 from sqlalchemy.orm import Mapped, mapped_column, validates
 
-from twisted.store.models import Base, utcnow
-
-TRAINING_STATUSES = ("running", "finished", "interrupted", "failed")
+from twisted.store.models import Base, RunLifecycle, utcnow
 
 
-class TrainingRun(Base):
-    """One training of the inverse model (``status`` in :data:`TRAINING_STATUSES`)."""
+class TrainingRun(RunLifecycle, Base):
+    """One training of the inverse model (status, start, end, message: :class:`RunLifecycle`)."""
 
     __tablename__ = "training_runs"
+    status_indexed = True
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    status: Mapped[str] = mapped_column(String(16), default="running", index=True)
     seed: Mapped[int] = mapped_column(BigInteger)
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     # The data snapshot: transitions with id <= max_transition_id (so a resume reads the same data).
@@ -39,10 +37,7 @@ class TrainingRun(Base):
     epochs_done: Mapped[int] = mapped_column(Integer, default=0)
     elapsed_s: Mapped[float] = mapped_column(Float, default=0.0)
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
-    started_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
-    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True))
-    message: Mapped[str | None] = mapped_column(Text)
 
 
 class Checkpoint(Base):
