@@ -14,6 +14,7 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -30,6 +31,7 @@ from cli.app import (
     fail,
     open_db,
     seed_option,
+    unwritable,
 )
 from cli.options import (
     Heuristic,
@@ -128,6 +130,14 @@ def plan_command(
         "little, pulled apart) ties the goal's knot; a reached state that fails the pull test does not "
         "end the search. Each pull test is stored with the run.",
     ),
+    picture: Annotated[
+        Path | None,
+        typer.Option(
+            "--picture",
+            help="When solved, draw the final rope to this PNG (with --tighten beside the rope pulled "
+            "tight), as `twisted render --run RUN_ID [--tightened]` does.",
+        ),
+    ] = None,
     as_json: bool = json_option("the result"),
 ) -> None:
     """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database.
@@ -161,9 +171,13 @@ def plan_command(
         },
     )
     _check(request)
+    if picture is not None:
+        picture = _picture_file(picture)
     search, result, setup_s, exit_code = _search(ctx, request, timeout_s, max_iterations, checkpoint_every_s)
     _print_result(search, result, as_json, setup_s)
     if result.solved:
+        if picture is not None:
+            _draw(ctx, result.run_id, picture, bool(search.options.tighten), as_json)
         raise typer.Exit(EXIT_OK)
     if result.status == "interrupted":
         err_console.print(
@@ -172,6 +186,31 @@ def plan_command(
         )
         raise typer.Exit(exit_code)
     raise typer.Exit(EXIT_NOT_REACHED)
+
+
+def _picture_file(path: Path) -> Path:
+    """``--picture``: a writable PNG path (exit 2 before anything is opened otherwise)."""
+    if path.suffix.lower() != ".png":
+        fail(f"--picture {path}: the file must end in .png")
+    problem = unwritable(path)
+    if problem is not None:
+        fail(f"--picture {path}: {problem}")
+    return path
+
+
+def _draw(ctx: typer.Context, run_id: int, png: Path, tightened: bool, as_json: bool) -> None:
+    """Draw a solved run's final rope (beside its pull test when it had one) to ``png``."""
+    from twisted.render import RenderError, render_run, render_tightened
+
+    with open_db(ctx) as store:
+        try:
+            rendered = render_tightened(store, run_id, png) if tightened else render_run(store, run_id, png)
+        except (RenderError, OSError) as exc:
+            err_console.print(f"the run is solved, but its picture was not drawn: {exc}", highlight=False)
+            return
+    if not as_json:
+        for path in rendered.files:
+            console.print(f"picture: {path}")
 
 
 def _check(request: _Request) -> None:

@@ -60,6 +60,7 @@ BAD: dict[str, list[tuple[list[str], str] | tuple[list[str], str, str]]] = {
         (["--goal", ONE_CROSSING, "--cross-move", "nan"], "'--cross-move'"),
         (["--goal", ONE_CROSSING, "--r1-room", "22"], "'--r1-room'"),
         (["--goal", ONE_CROSSING, "--plan-limit", "0"], "'--plan-limit'"),
+        (["--goal", ONE_CROSSING, "--picture", "knot.txt"], "--picture knot.txt"),
         (["--goal", ONE_CROSSING, "--seed", "-1"], "'--seed'"),
         (["--goal", ONE_CROSSING, "--timeout", "nan"], "'--timeout'"),
         (["--goal", ONE_CROSSING, "--workers", "0"], "--workers 0"),

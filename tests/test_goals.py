@@ -178,8 +178,11 @@ def test_goal_files_take_knot_names() -> None:
 @pytest.mark.slow
 def test_plan_to_an_overhand_knot_solves_replays_and_is_stored(tmp_path: Path) -> None:
     db = f"sqlite:///{tmp_path / 'knot.db'}"
-    code, out = _cli(db, "plan", "--knot", "overhand", "--workers", "1", "--timeout", "240", "--json")
+    picture = tmp_path / "knot.png"
+    args = ["--workers", "1", "--timeout", "240", "--picture", str(picture), "--json"]
+    code, out = _cli(db, "plan", "--knot", "overhand", *args)
     assert code == 0, out
+    assert picture.read_bytes().startswith(b"\x89PNG")  # --picture: the solved run's final rope
     result = json.loads(out)
     assert result["solved"] and result["goal"] == "knot:overhand@3" and result["knot"] == "overhand"
     assert len(result["goal_states"]) == 4 and result["tighten"] is False and result["pull_tests"] == 0
