@@ -18,7 +18,10 @@ from twisted.moves import (
     Plan,
     enumerate_states,
     explains,
+    neighbours,
     plans,
+    plans_both_ways,
+    removals,
     sub_states,
     successor_states,
     successors,
@@ -398,7 +401,8 @@ def test_plan_to_dict_is_json_and_round_trips() -> None:
 def test_explains() -> None:
     assert explains(EMPTY, CURL_RIGHT) == Move("R1", 0, side="R", sign="+", over="O")
     assert explains(EMPTY, GOAL_3) is None
-    assert explains(CURL_RIGHT, EMPTY) is None
+    assert explains(CURL_RIGHT, EMPTY) == Move("R1", 1, side="R", sign="+", over="O", remove=True)
+    assert explains(GOAL_3, EMPTY) is None
 
 
 # --------------------------------------------------------------------------------------------
@@ -425,3 +429,169 @@ def test_every_successor_is_valid_p_data_with_more_crossings(p: PData) -> None:
 def test_mirror_and_reverse_commute_with_successors(p: PData) -> None:
     assert set(successor_states(p.mirror())) == {t.mirror() for t in successor_states(p)}
     assert set(successor_states(p.reverse())) == {t.reverse() for t in successor_states(p)}
+
+
+# --------------------------------------------------------------------------------------------
+# removing moves: the inverse of each adding move
+
+HAIRPIN = parse_p_data('[[1,"O",4,"+"],[2,"O",3,"-"],[3,"U",2,"-"],[4,"U",1,"+"]]')
+
+
+@pytest.fixture(scope="module")
+def states_to_4() -> dict[int, list[PData]]:
+    return enumerate_states(4)
+
+
+def test_removals_are_exactly_the_inverse_moves_up_to_4_crossings(
+    states_to_4: dict[int, list[PData]],
+) -> None:
+    """For every state s' of up to 4 crossings, the (state, kind) pairs its removing moves reach are
+    exactly the (s, kind) with an adding move of that kind from s to s', found independently by
+    running the adding moves of every state with 1 or 2 crossings fewer: s -> m -> s' -> m^-1 -> s,
+    and every removing move is undone by an adding move of its kind."""
+    made_by: dict[PData, set[tuple[PData, str]]] = {}
+    for c in range(4):
+        for s in states_to_4[c]:
+            for succ in successors(s):
+                if succ.state.cross <= 4:
+                    made_by.setdefault(succ.state, set()).add((s, succ.move.kind))
+    for c in range(5):
+        for p in states_to_4[c]:
+            undone = {(r.state, r.move.kind) for r in removals(p)}
+            assert undone == made_by.get(p, set()), p.key
+
+
+def test_removal_counts_per_crossing_level(states_to_4: dict[int, list[PData]]) -> None:
+    """Removing moves per level (R1, R2, Cross), and the distinct (s', s) pairs they make, which
+    equal the distinct (s, s') pairs of the adding moves into that level (counted independently from
+    the states below): 4, 80, 1,460 and 26,564 pairs into 1..4 crossings."""
+    counts = {}
+    for c in range(1, 5):
+        kinds = Counter(r.move.kind for p in states_to_4[c] for r in removals(p))
+        pairs = sum(len({r.state for r in removals(p)}) for p in states_to_4[c])
+        forward = sum(
+            len({s.state for s in successors(q) if s.state.cross == c})
+            for below in (c - 1, c - 2)
+            if below >= 0
+            for q in states_to_4[below]
+        )
+        assert pairs == forward
+        counts[c] = (kinds["R1"], kinds["R2"], kinds["Cross"], pairs)
+    assert counts == {
+        1: (4, 0, 0, 4),
+        2: (48, 8, 48, 80),
+        3: (800, 144, 736, 1460),
+        4: (14784, 2736, 11712, 26564),
+    }
+    assert removals(EMPTY) == []
+
+
+def test_removals_from_a_curl_and_a_hairpin() -> None:
+    """The right curl: only its curl straightened (segment 1 is the loop, monogon on its right).
+    The hairpin R2 of the empty rope (visits 1-4 and 2-3): the inner loop 2-3 is a curl (R1), the
+    bigon between segments 1 and 3 pulls apart (R2), and the head and the tail can each be pulled
+    back across the other end (Cross, twice): 4 removing moves."""
+    assert [str(r.move) for r in removals(CURL_RIGHT)] == ["R1^-1(segment=1, side=R, over=O, sign=+)"]
+    assert [r.state for r in removals(CURL_RIGHT)] == [EMPTY]
+    found = removals(HAIRPIN)
+    assert [r.move.kind for r in found] == ["R1", "R2", "Cross", "Cross"]
+    assert all(r.move.remove for r in found)
+    assert found[1].state == EMPTY
+    assert found[1].move == Move(
+        "R2", 1, side="R", sign="+", over="O", other_segment=3, other_side="R", remove=True
+    )
+    assert {r.state.cross for r in found} == {0, 1}
+    assert HAIRPIN in successor_states(EMPTY)
+
+
+@settings(max_examples=60, deadline=None)
+@given(some_state)
+def test_r1_removal_names_the_curl_it_straightens(p: PData) -> None:
+    """An R1 curl made on segment k (side, sign, over) is straightened by the removing R1 on its
+    loop, segment k + 1 of the new state, with the same side, sign and over."""
+    for s in successors(p):
+        if s.move.kind != "R1":
+            continue
+        back = {
+            (r.move.segment, r.move.side, r.move.sign, r.move.over) for r in removals(s.state) if r.state == p
+        }
+        assert (s.move.segment + 1, s.move.side, s.move.sign, s.move.over) in back
+
+
+def test_move_dicts_say_which_way() -> None:
+    undo = removals(CURL_RIGHT)[0].move
+    assert undo.to_dict()["remove"] is True and Move.from_dict(undo.to_dict()) == undo
+    add = successors(EMPTY)[0].move
+    assert "remove" not in add.to_dict() and not Move.from_dict(add.to_dict()).remove
+
+
+def _check_both_ways_plan(plan: Plan, start: PData, goals: set[PData]) -> None:
+    assert plan.states[0] == start and plan.states[-1] in goals
+    assert not any(s in goals for s in plan.states[:-1])
+    for before, after, move in zip(plan.states[:-1], plan.states[1:], plan.moves, strict=True):
+        assert after in {s.state for s in neighbours(before) if s.move == move}
+        assert (after.cross < before.cross) == move.remove
+
+
+def _distance(start: PData, goals: set[PData], top: int) -> int:
+    """Unpruned BFS over adding and removing moves (at most ``top`` crossings)."""
+    seen, frontier, d = {start}, [start], 0
+    while frontier:
+        if any(p in goals for p in frontier):
+            return d
+        d += 1
+        nxt = []
+        for u in frontier:
+            for s in neighbours(u, top):
+                if s.state not in seen:
+                    seen.add(s.state)
+                    nxt.append(s.state)
+        frontier = nxt
+    return -1
+
+
+def test_untie_plans_from_every_3_crossing_state(states_to_3: dict[int, list[PData]]) -> None:
+    """From every 3-crossing state there is a shortest plan to the straight rope; its length is the
+    unpruned BFS distance (checked on every 11th state), and it removes crossings only."""
+    lengths = Counter()
+    for i, p in enumerate(states_to_3[3]):
+        found = plans_both_ways(p, [EMPTY], limit=10)
+        assert found
+        for plan in found:
+            _check_both_ways_plan(plan, p, {EMPTY})
+            assert plan.length == found[0].length
+            assert all(m.remove for m in plan.moves)
+        assert len({tuple(plan.states) for plan in found}) == len(found)
+        if i % 11 == 0:
+            assert found[0].length == _distance(p, {EMPTY}, 3)
+        lengths[found[0].length] += 1
+    assert sum(lengths.values()) == 528 and set(lengths) <= {2, 3}
+
+
+def test_retie_plans_mix_removing_and_adding_moves() -> None:
+    """Overhand (3 crossings) to a figure-eight state (4): the shortest plans take crossings out and
+    put others in; a goal below the start (a 2-crossing state) too; the length is the BFS distance."""
+    from twisted.goals import knot_goal
+
+    figure_eight = set(knot_goal("figure-eight").states)
+    found = plans_both_ways(GOAL_3, figure_eight, limit=20)
+    assert found and len(found) == 20
+    for plan in found:
+        _check_both_ways_plan(plan, GOAL_3, figure_eight)
+    assert any(m.remove for m in found[0].moves) and any(not m.remove for m in found[0].moves)
+    assert found[0].length == _distance(GOAL_3, figure_eight, 4)
+    two = parse_p_data('[[1,"O",2,"-"],[2,"U",1,"-"],[3,"O",4,"-"],[4,"U",3,"-"]]')
+    down = plans_both_ways(GOAL_3, [two], limit=5)
+    assert down and down[0].length == _distance(GOAL_3, {two}, 3)
+    for plan in down:
+        _check_both_ways_plan(plan, GOAL_3, {two})
+
+
+def test_plans_both_ways_trivial_bounded_and_bad_input() -> None:
+    assert plans_both_ways(CURL_RIGHT, [CURL_RIGHT]) == [Plan([CURL_RIGHT], [])]
+    assert plans_both_ways(GOAL_3, [CURL_RIGHT], max_cross=2) == []  # the start is above the bound
+    assert plans_both_ways(EMPTY, [GOAL_3])[0].length == 3  # adding only, as plans() finds
+    with pytest.raises(ValueError):
+        plans_both_ways(EMPTY, [CURL_RIGHT], limit=0)
+    with pytest.raises(ValueError):
+        plans_both_ways(EMPTY, [])

@@ -1,8 +1,9 @@
 """High level of TWISTED: R1 / R2 / Cross moves on the P-data of an open rope, and BFS plans.
 
 Every move happens inside one face of the rope's planar diagram (:mod:`twisted.diagram`) and adds
-crossings; none removes any (the paper has no undo moves). A move inserts new visits into the
-segments it touches and keeps every old crossing with its order along the rope, O/U and sign.
+crossings (the paper has no undo moves). A move inserts new visits into the segments it touches and
+keeps every old crossing with its order along the rope, O/U and sign. Removing moves, the inverse of
+each (``Move.remove``; :func:`removals`, :func:`plans_both_ways`), are described at the end.
 
 Sign rule used throughout: a strand X crossing a strand B from B's left to B's right gives
 ``+`` when X is over and ``-`` when X is under; from right to left the signs swap. (With B along
@@ -47,6 +48,20 @@ first crossing undoes a Cross (or an R1 on segment 0), so every planar P-data wi
 one move away from one with n-1. Hence enumerating by moves from the empty rope reaches exactly the
 planar P-data: 4, 40, 528 and 7,968 states with 1, 2, 3 and 4 crossings, the reference's numbers
 (``test_enumeration_is_exactly_the_planar_p_data`` checks this against brute force).
+
+Removing moves. Each takes whole crossings out and keeps the others, so it undoes one adding move:
+  - R1^-1 (a curl straightened): a crossing whose two visits i, i + 1 are consecutive. Its loop,
+    segment i, has nothing on it, and the rope's other two ends at the crossing are neighbours there,
+    so one side of the loop bounds a monogon; the move names the loop and that side (the side the R1
+    that made the curl names, with the same sign and over).
+  - R2^-1 (two strands pulled apart): a bigon face bounded by segments a < b that both run between
+    the same two crossings, with the piece on a over (or under) the piece on b at both.
+  - Cross^-1 (a rope end pulled back out across a strand): the head's first visit or the tail's
+    last one, unless its partner is the next visit along (then it is R1^-1).
+Segments are those of the state the move starts from (the one with more crossings). For every state
+up to 4 crossings the states and kinds the removing moves reach are exactly those of the adding
+moves into it (tests/test_moves.py). With both kinds the move graph has cycles; plans through it
+(:func:`plans_both_ways`) are the shortest ones, and a plan may take crossings out and put others in.
 """
 
 from __future__ import annotations
@@ -62,14 +77,18 @@ from twisted.topology import EMPTY, PData, PDataError, Visit, parse_p_data
 __all__ = [
     "DEFAULT_PLAN_LIMIT",
     "MOVES_VERSION",
+    "REMOVALS_VERSION",
     "Move",
     "Plan",
     "Successor",
     "enumerate_states",
     "explains",
     "parse_state",
+    "neighbours",
     "plans",
+    "plans_both_ways",
     "plans_to_any",
+    "removals",
     "successors",
     "sub_states",
 ]
@@ -79,6 +98,9 @@ MoveKind = Literal["R1", "R2", "Cross"]
 DEFAULT_PLAN_LIMIT = 100
 # Bumped whenever the move set changes, so that plans cached in a database are recomputed.
 MOVES_VERSION = 1
+# Bumped whenever the removing moves or plans_both_ways change; part of the plan cache's key of a
+# query answered both ways (twisted.store.plans), so adding-only answers stay valid when it moves.
+REMOVALS_VERSION = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,14 +125,18 @@ class Move:
     over: str | None = None
     other_segment: int | None = None
     other_side: str | None = None
+    remove: bool = False  # the inverse move: takes crossings out (see "Removing moves" above)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict; fields that do not apply to this kind are left out."""
+        """JSON-able dict; fields that do not apply to this kind are left out (``remove`` when False,
+        so an adding move's dict is what it was before removing moves existed)."""
         out: dict[str, Any] = {"kind": self.kind, "segment": self.segment}
         for name in ("side", "other_segment", "other_side", "over", "sign"):
             value = getattr(self, name)
             if value is not None:
                 out[name] = value
+        if self.remove:
+            out["remove"] = True
         return out
 
     @classmethod
@@ -123,11 +149,12 @@ class Move:
             over=d.get("over"),
             other_segment=d.get("other_segment"),
             other_side=d.get("other_side"),
+            remove=bool(d.get("remove", False)),
         )
 
     def __str__(self) -> str:
-        args = ", ".join(f"{k}={v}" for k, v in self.to_dict().items() if k != "kind")
-        return f"{self.kind}({args})"
+        args = ", ".join(f"{k}={v}" for k, v in self.to_dict().items() if k not in ("kind", "remove"))
+        return f"{self.kind}{'^-1' if self.remove else ''}({args})"
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,13 +346,106 @@ def successor_states(p: PData) -> list[PData]:
 
 
 def explains(start: PData, end: PData) -> Move | None:
-    """The first move taking ``start`` to ``end``, or None when no single move does."""
-    if end.cross <= start.cross or end.cross > start.cross + 2:
+    """The first move taking ``start`` to ``end``, or None when no single move does (a removing move
+    when ``end`` has fewer crossings)."""
+    if abs(end.cross - start.cross) not in (1, 2):
         return None
-    for s in _successors(start):
+    for s in _successors(start) if end.cross > start.cross else _removals(start):
         if s.state == end:
             return s.move
     return None
+
+
+# ---------------------------------------------------------------------------------------------
+# the removing moves: each undoes one adding move
+
+
+def _without(p: PData, positions: Iterable[int]) -> PData:
+    """``p`` with the visits at ``positions`` (whole crossings: both visits) taken out, renumbered."""
+    gone = set(positions)
+    kept = [pos for pos in range(1, 2 * p.cross + 1) if pos not in gone]
+    renumber = {old: new for new, old in enumerate(kept, start=1)}
+    return PData(
+        tuple(
+            _visit(renumber[pos], v.over, renumber[v.partner], v.sign)
+            for pos in kept
+            for v in (p.visits[pos - 1],)
+        )
+    )
+
+
+def _r1_removals(p: PData, d: Diagram) -> Iterator[Successor]:
+    """A crossing whose two visits are consecutive (i, i + 1) closes a loop, segment i, that has
+    nothing on it; the rest of the rope leaves the crossing by the two other ends, which are
+    neighbours there, so one side of the loop bounds a face of its own (a monogon). Straightening
+    the curl is R1 backwards: the move names the loop segment and the monogon's side."""
+    for v in p.visits:
+        if v.partner != v.position + 1:
+            continue
+        loop = v.position
+        side = LEFT if d.faces[d.face_of(loop, LEFT)].sides == ((loop, LEFT),) else RIGHT
+        move = Move("R1", loop, side=side, sign=v.sign, over=v.over, remove=True)
+        yield Successor(_without(p, (loop, loop + 1)), move)
+
+
+def _r2_removals(p: PData, d: Diagram) -> Iterator[Successor]:
+    """A bigon, a face bounded by two segments a < b that both run between the same two crossings,
+    is pulled apart when the piece on a passes over (or under) the piece on b at both crossings.
+    The move names the two segments and the sides by which they bound the bigon; ``over`` and
+    ``sign`` are those of a's first visit."""
+    last = 2 * p.cross
+    for face in d.faces:
+        if len(face.sides) != 2:
+            continue
+        (a, sa), (b, sb) = sorted(face.sides)
+        if a == b or not (0 < a and b < last):
+            continue  # an end segment ends at a tip, not at a crossing
+        first, second = p.visits[a - 1], p.visits[a]  # visits a and a + 1 (positions are 1-based)
+        if {first.partner, second.partner} != {b, b + 1}:
+            continue
+        if first.over != second.over:
+            continue  # one piece over at one crossing and under at the other: a clasp, not a bigon
+        move = Move(
+            "R2", a, side=sa, sign=first.sign, over=first.over, other_segment=b, other_side=sb, remove=True
+        )
+        yield Successor(_without(p, (a, a + 1, b, b + 1)), move)
+
+
+def _cross_removals(p: PData) -> Iterator[Successor]:
+    """A rope tip pulled back across the strand it last crossed: the head's first visit or the
+    tail's last one is taken out (when its partner is the next visit along, the tip closes a curl,
+    which is R1's). ``other_segment`` is the segment of the crossed strand that ends at the
+    crossing; ``over`` is the tip's O/U."""
+    last = 2 * p.cross
+    if last == 0:
+        return
+    for tip, e in ((p.visits[0], 0), (p.visits[-1], last)):
+        if abs(tip.partner - tip.position) == 1:
+            continue
+        move = Move("Cross", e, sign=tip.sign, over=tip.over, other_segment=tip.partner - 1, remove=True)
+        yield Successor(_without(p, (tip.position, tip.partner)), move)
+
+
+@lru_cache(maxsize=4096)
+def _removals(p: PData) -> tuple[Successor, ...]:
+    d = diagram(p)
+    return (*_r1_removals(p, d), *_r2_removals(p, d), *_cross_removals(p))
+
+
+def removals(p: PData) -> list[Successor]:
+    """All removing moves from ``p`` (``move.remove`` is True) with the state each leaves, in a fixed
+    order (R1, R2, Cross). Each undoes an adding move: ``s`` is among the states :func:`removals`
+    of ``s'`` lists exactly when ``s'`` is among :func:`successor_states` of ``s``, with a move of
+    the same kind both ways (tests/test_moves.py checks this for every state up to 4 crossings)."""
+    return list(_removals(p))
+
+
+def neighbours(p: PData, max_cross: int | None = None) -> list[Successor]:
+    """Adding moves (those to at most ``max_cross`` crossings when given) and then removing moves."""
+    out = list(_removals(p))
+    if max_cross is None or p.cross < max_cross:
+        out[:0] = [s for s in _successors(p) if max_cross is None or s.state.cross <= max_cross]
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -360,15 +480,21 @@ def sub_states(goal: PData) -> frozenset[PData]:
     n = len(crossings)
     out = set()
     for mask in range(1 << n):
-        kept = sorted(pos for i, (o, u, _) in enumerate(crossings) if mask >> i & 1 for pos in (o, u))
-        renumber = {old: new for new, old in enumerate(kept, start=1)}
-        visits = tuple(
-            _visit(renumber[pos], v.over, renumber[v.partner], v.sign)
-            for pos in kept
-            for v in (goal.visits[pos - 1],)
-        )
-        out.add(PData(visits))
+        deleted = (pos for i, (o, u, _) in enumerate(crossings) if mask >> i & 1 for pos in (o, u))
+        out.add(_without(goal, deleted))
     return frozenset(out)
+
+
+def _goal_set(start: PData, goals: Iterable[PData], limit: int) -> frozenset[PData]:
+    """The goals as a set, after the checks every plan search makes (ValueError / PDataError)."""
+    if limit < 1:
+        raise ValueError(f"limit must be >= 1, got {limit}")
+    targets = frozenset(goals)
+    if not targets:
+        raise ValueError("give at least one goal state")
+    for goal in sorted(targets, key=lambda p: p.key):
+        diagram(goal)  # a goal no rope can have is an input error, not "unreachable"
+    return targets
 
 
 def plans(start: PData, goal: PData, limit: int = DEFAULT_PLAN_LIMIT) -> list[Plan]:
@@ -388,15 +514,9 @@ def plans_to_any(start: PData, goals: Iterable[PData], limit: int = DEFAULT_PLAN
     One BFS over the union of the goals' sub-states; a plan stops at the first goal it reaches. With one
     goal this is :func:`plans`.
     """
-    if limit < 1:
-        raise ValueError(f"limit must be >= 1, got {limit}")
-    targets = frozenset(goals)
-    if not targets:
-        raise ValueError("give at least one goal state")
+    targets = _goal_set(start, goals, limit)
     if start in targets:
         return [Plan([start], [])]
-    for goal in sorted(targets, key=lambda p: p.key):
-        diagram(goal)  # a goal no rope can have is an input error, not "unreachable"
     reachable = [goal for goal in targets if goal.cross > start.cross]
     allowed = frozenset().union(*(sub_states(goal) for goal in reachable))
     if start not in allowed:
@@ -432,6 +552,92 @@ def plans_to_any(start: PData, goals: Iterable[PData], limit: int = DEFAULT_PLAN
             if len(out) >= limit:
                 return out
     return out
+
+
+def plans_both_ways(
+    start: PData, goals: Iterable[PData], limit: int = DEFAULT_PLAN_LIMIT, max_cross: int | None = None
+) -> list[Plan]:
+    """The shortest move sequences from ``start`` to any of ``goals`` with adding and removing moves.
+
+    Every state on the way has at most ``max_cross`` crossings (default: the most of the start and the
+    goals), so untying (a goal of fewer crossings, or ``[]``) and tying again (a goal elsewhere) both
+    work, and a plan may take some crossings out and add others. Only plans of the least length are
+    returned (up to ``limit``, in a fixed order; each a different state sequence): unlike
+    :func:`plans_to_any` the move graph has cycles here, so "all plans, shortest first" has no end.
+    The BFS deepens a bound ``D`` from the least length any plan can have and keeps only states from
+    which the goals can still be reached within ``D`` (a move changes the crossings by 1 or 2). An
+    unreachable goal gives ``[]``.
+    """
+    targets = _goal_set(start, goals, limit)
+    if start in targets:
+        return [Plan([start], [])]
+    top_cross = max(start.cross, max(goal.cross for goal in targets)) if max_cross is None else max_cross
+    goal_crosses = sorted({goal.cross for goal in targets if goal.cross <= top_cross})
+    if not goal_crosses or start.cross > top_cross:
+        return []
+
+    def least_moves(p: PData) -> int:
+        return min((abs(p.cross - c) + 1) // 2 for c in goal_crosses)
+
+    bound = least_moves(start)
+    while True:
+        layers = _bounded_layers(start, targets, top_cross, bound, least_moves)
+        if layers is None:
+            return []  # no state within the crossing bound is left unexplored: unreachable
+        found, parents = layers
+        if found:
+            break
+        bound += 1
+    out: list[Plan] = []
+    for goal in found:
+        for states, moves in _paths_back(goal, parents):
+            out.append(Plan(states, moves))
+            if len(out) >= limit:
+                return out
+    return out
+
+
+def _bounded_layers(
+    start: PData, targets: frozenset[PData], top_cross: int, bound: int, least_moves: Any
+) -> tuple[list[PData], dict[PData, list[tuple[PData, Move]]]] | None:
+    """BFS layers from ``start`` up to depth ``bound``, keeping a state only when it can still reach a
+    goal in the moves left; the goals at depth ``bound`` and each state's parents on a shortest path.
+    None when the search ran dry before the bound (then no bound is enough)."""
+    depth = {start: 0}
+    parents: dict[PData, list[tuple[PData, Move]]] = {}
+    frontier = [start]
+    pruned = False
+    for d in range(bound):
+        next_frontier: list[PData] = []
+        for u in frontier:
+            for s in neighbours(u, top_cross):
+                v = s.state
+                if d + 1 + least_moves(v) > bound:
+                    pruned = True
+                    continue
+                if v not in depth:
+                    depth[v] = d + 1
+                    next_frontier.append(v)
+                    parents[v] = []
+                if depth[v] == d + 1 and all(w != u for w, _ in parents[v]):
+                    parents[v].append((u, s.move))
+        frontier = [v for v in next_frontier if v not in targets or d + 1 == bound]
+        if not frontier:
+            return None if not pruned else ([], parents)
+    found = sorted((v for v in frontier if v in targets), key=lambda p: p.key)
+    return found, parents
+
+
+def _paths_back(
+    v: PData, parents: dict[PData, list[tuple[PData, Move]]]
+) -> Iterator[tuple[list[PData], list[Move]]]:
+    """Every shortest path from the BFS root to ``v`` (depth-first over the parents, fixed order)."""
+    if v not in parents:
+        yield [v], []
+        return
+    for u, move in parents[v]:
+        for states, moves in _paths_back(u, parents):
+            yield [*states, v], [*moves, move]
 
 
 def _paths(

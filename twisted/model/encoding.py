@@ -191,7 +191,9 @@ def _side(side: str | None) -> float:
 
 def encode_move(move: Move | None) -> npt.NDArray[np.float32]:
     """(MOVE_DIM,) float32 of an R1 / R2 / Cross move (:class:`twisted.moves.Move`); zeros when None
-    (a transition no single move explains). Sides: L +1, R -1; over: O +1, U -1; sign +1 / -1."""
+    (a transition no single move explains). Sides: L +1, R -1; over: O +1, U -1; sign +1 / -1; the
+    kind's one-hot entry is -1 for a removing move (``move.remove``), whose segments are those of
+    the state it starts from, like an adding move's."""
     out = np.zeros(MOVE_DIM, dtype=np.float32)
     if move is None:
         return out
@@ -200,7 +202,8 @@ def encode_move(move: Move | None) -> npt.NDArray[np.float32]:
     ):
         raise EncodingError(f"move {move} starts from more than {MAX_CROSSINGS - 1} crossings")
     out[0] = 1.0
-    out[1 + MOVE_KINDS.index(move.kind)] = 1.0
+    # a removing move (twisted.moves.removals) is told apart by its kind entry: -1 instead of +1
+    out[1 + MOVE_KINDS.index(move.kind)] = -1.0 if move.remove else 1.0
     base = 1 + len(MOVE_KINDS)
     out[base + move.segment] = 1.0
     if move.other_segment is not None:

@@ -37,12 +37,12 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal
-from twisted.moves import MOVES_VERSION, Move, Plan, plans, plans_to_any
+from twisted.moves import MOVES_VERSION, REMOVALS_VERSION, Move, Plan, plans_both_ways, plans_to_any
 from twisted.store.db import Store
 from twisted.store.models import Base, utcnow
 from twisted.topology import PData, parse_p_data
 
-__all__ = ["PlanQuery", "PlanRow", "cached_plans", "get_plans", "put_plans"]
+__all__ = ["BOTH_WAYS_SUFFIX", "PlanQuery", "PlanRow", "cached_plans", "get_plans", "put_plans"]
 
 
 class PlanQuery(Base):
@@ -86,18 +86,29 @@ class PlanRow(Base):
         return Plan([parse_p_data(s) for s in self.states], [Move.from_dict(m) for m in self.moves])
 
 
-def _goal_key(goal: PData | Goal) -> str:
-    return goal.key if isinstance(goal, PData) else goal.cache_key
+BOTH_WAYS_SUFFIX = f"|both-ways@{REMOVALS_VERSION}"
 
 
-def get_plans(session: Session, start: PData, goal: PData | Goal, limit: int) -> list[Plan] | None:
+def _goal_key(goal: PData | Goal, both_ways: bool = False) -> str:
+    """The goal's key; an answer with removing moves (:func:`twisted.moves.plans_both_ways`) is kept
+    under the key with :data:`BOTH_WAYS_SUFFIX`, which names the removing moves' version, so the
+    adding-only answers stored before keep their keys and stay valid."""
+    key = goal.key if isinstance(goal, PData) else goal.cache_key
+    return key + BOTH_WAYS_SUFFIX if both_ways else key
+
+
+def get_plans(
+    session: Session, start: PData, goal: PData | Goal, limit: int, both_ways: bool = False
+) -> list[Plan] | None:
     """The cached answer to ``plans(start, goal, limit)``, or None when the cache cannot give it.
 
     A query stored with a limit of at least ``limit``, or one stored complete, answers any limit:
     the BFS order is deterministic, so the first ``limit`` plans of a larger answer are the answer.
     """
     query = session.scalars(
-        select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == _goal_key(goal))
+        select(PlanQuery).where(
+            PlanQuery.start_key == start.key, PlanQuery.goal_key == _goal_key(goal, both_ways)
+        )
     ).one_or_none()
     if query is None or query.moves_version != MOVES_VERSION:
         return None
@@ -118,9 +129,10 @@ def put_plans(
     limit: int,
     found: list[Plan],
     compute_s: float = 0.0,
+    both_ways: bool = False,
 ) -> None:
     """Store the answer ``found = plans(start, goal, limit)``, replacing any older one (flushes)."""
-    goal_key = _goal_key(goal)
+    goal_key = _goal_key(goal, both_ways)
     old = session.scalars(
         select(PlanQuery).where(PlanQuery.start_key == start.key, PlanQuery.goal_key == goal_key)
     ).one_or_none()
@@ -156,19 +168,25 @@ def put_plans(
     session.flush()
 
 
-def _compute(start: PData, goal: PData | Goal, limit: int) -> tuple[list[Plan], float]:
+def _compute(start: PData, goal: PData | Goal, limit: int, both_ways: bool) -> tuple[list[Plan], float]:
     t0 = time.perf_counter()
-    found = plans(start, goal, limit) if isinstance(goal, PData) else plans_to_any(start, goal.states, limit)
+    members = [goal] if isinstance(goal, PData) else list(goal.states)
+    if both_ways:
+        found = plans_both_ways(start, members, limit)
+    else:
+        found = plans_to_any(start, members, limit)
     return found, time.perf_counter() - t0
 
 
 def cached_plans(
-    store_or_session: Store | Session, start: PData, goal: PData | Goal, limit: int
+    store_or_session: Store | Session, start: PData, goal: PData | Goal, limit: int, both_ways: bool = False
 ) -> list[Plan]:
     """``plans(start, goal, limit)`` through the database cache (shortest first; ``[]`` = unreachable).
 
     ``goal`` may be a set of states (:class:`twisted.goals.Goal`, e.g. a knot): then the plans lead to
-    any member (:func:`twisted.moves.plans_to_any`), cached under :attr:`Goal.cache_key`.
+    any member (:func:`twisted.moves.plans_to_any`), cached under :attr:`Goal.cache_key`. With
+    ``both_ways`` the plans may also remove crossings (:func:`twisted.moves.plans_both_ways`: the
+    shortest only), cached under the goal's key with :data:`BOTH_WAYS_SUFFIX`.
 
     With a :class:`Store` the answer is read in one short transaction and, on a miss, computed outside
     any transaction and written in another (if a concurrent process stored it first, its rows are
@@ -178,23 +196,23 @@ def cached_plans(
         raise ValueError(f"limit must be >= 1, got {limit}")
     if isinstance(store_or_session, Session):
         session = store_or_session
-        cached = get_plans(session, start, goal, limit)
+        cached = get_plans(session, start, goal, limit, both_ways)
         if cached is not None:
             return cached
-        found, compute_s = _compute(start, goal, limit)
-        put_plans(session, start, goal, limit, found, compute_s)
+        found, compute_s = _compute(start, goal, limit, both_ways)
+        put_plans(session, start, goal, limit, found, compute_s, both_ways)
         return found
 
     store = store_or_session
     with store.session() as session:
-        cached = get_plans(session, start, goal, limit)
+        cached = get_plans(session, start, goal, limit, both_ways)
     if cached is not None:
         return cached
-    found, compute_s = _compute(start, goal, limit)
+    found, compute_s = _compute(start, goal, limit, both_ways)
     try:
         with store.session(write=True) as session:
-            if get_plans(session, start, goal, limit) is None:
-                put_plans(session, start, goal, limit, found, compute_s)
+            if get_plans(session, start, goal, limit, both_ways) is None:
+                put_plans(session, start, goal, limit, found, compute_s, both_ways)
     except IntegrityError:
         # PostgreSQL: another process inserted the same (start, goal) between our check and insert;
         # its answer is the same BFS result, so ours is simply not stored.
