@@ -33,6 +33,7 @@ from twisted.store import (
     head_revisions,
     open_store,
 )
+from twisted.store.models import by_id_or_newest
 from twisted.store.queries import (
     BatchRecord,
     KeptTransition,
@@ -398,6 +399,25 @@ def test_stale_running_runs_are_marked_interrupted(db_url: str) -> None:
         with store.session() as session:
             statuses = {r.id: r.status for r in session.scalars(select(Run))}
         assert statuses == {dead.id: "interrupted", alive.id: "running", done.id: "finished"}
+
+
+def test_a_row_by_id_or_the_newest_and_a_missing_id_lists_the_ids(db_url: str) -> None:
+    with open_store(db_url) as store:
+        with store.session() as session:
+            assert by_id_or_newest(session, Run, None, what="run", see="twisted runs") is None
+        with store.session(write=True) as session:
+            first, second = (start_run(session, "collect", {}).id for _ in range(2))
+            end_run(session, first, "failed", "it broke")
+        with store.session() as session:
+            newest = by_id_or_newest(session, Run, None, what="run", see="twisted runs")
+            asked = by_id_or_newest(session, Run, first, what="run", see="twisted runs")
+            assert newest is not None and newest.id == second and newest.ended_at is None
+            assert asked is not None and (asked.status, asked.message) == ("failed", "it broke")
+            assert asked.ended_at is not None
+            missing = second + 7
+            listed = rf"no run {missing} .*\(ids: \[{first}, {second}\]\); see `twisted runs`"
+            with pytest.raises(LookupError, match=listed):
+                by_id_or_newest(session, Run, missing, what="run", see="twisted runs")
 
 
 def test_reader_does_not_block_writer(sqlite_url: str, tmp_path: Path) -> None:

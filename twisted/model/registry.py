@@ -17,6 +17,7 @@ from sqlalchemy import select
 
 from twisted.model.network import InverseModel
 from twisted.store.db import Store
+from twisted.store.models import by_id_or_newest
 from twisted.store.training import TrainedModel
 
 __all__ = [
@@ -129,16 +130,9 @@ def load_model(store: Store | None = None, model_id: int | None = None) -> Inver
     """Model ``model_id`` from the store, else the newest stored one, else the shipped default."""
     if store is not None:
         with store.session() as session:
-            if model_id is not None:
-                row = session.get(TrainedModel, model_id)
-                if row is None:
-                    known = session.scalars(select(TrainedModel.id).order_by(TrainedModel.id)).all()
-                    raise ModelError(
-                        f"there is no model {model_id} in the database (models: {list(known) or 'none'}); "
-                        "see `twisted models`"
-                    )
-            else:
-                row = session.scalars(select(TrainedModel).order_by(TrainedModel.id.desc())).first()
+            row = by_id_or_newest(
+                session, TrainedModel, model_id, what="model", see="twisted models", error=ModelError
+            )
             if row is not None:
                 return _from_bytes(row.weights, row.id, f"model {row.id} of the database")
     elif model_id is not None:

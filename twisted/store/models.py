@@ -12,7 +12,7 @@ Arrays are stored as little-endian float64 BLOBs so a configuration restores bit
 from __future__ import annotations
 
 import datetime as dt
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -28,8 +28,10 @@ from sqlalchemy import (
     MetaData,
     String,
     Text,
+    inspect,
+    select,
 )
-from sqlalchemy.orm import DeclarativeBase, Mapped, declared_attr, mapped_column
+from sqlalchemy.orm import DeclarativeBase, Mapped, Session, declared_attr, mapped_column
 
 # Deterministic constraint names: Alembic batch mode (SQLite) and PostgreSQL both need named constraints
 # to alter or drop them later.
@@ -66,6 +68,35 @@ class Base(DeclarativeBase):
 
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
     type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+RowT = TypeVar("RowT", bound=Base)
+
+
+def by_id_or_newest(
+    session: Session,
+    table: type[RowT],
+    row_id: int | None,
+    *,
+    what: str,
+    see: str,
+    error: type[Exception] = LookupError,
+) -> RowT | None:
+    """Row ``row_id`` of ``table`` or, when it is None, the newest row (highest id; None if there is none).
+
+    An id that is not there raises ``error``, naming ``what`` was asked for, the ids there are, and the
+    command ``see`` that lists them (how a stored model or SAC policy is chosen by id).
+    """
+    (key,) = inspect(table).primary_key
+    if row_id is None:
+        return session.scalars(select(table).order_by(key.desc()).limit(1)).first()
+    row = session.get(table, row_id)
+    if row is None:
+        known = session.scalars(select(key).order_by(key)).all()
+        raise error(
+            f"there is no {what} {row_id} in the database (ids: {list(known) or 'none'}); see `{see}`"
+        )
+    return row
 
 
 class RunLifecycle:
