@@ -12,11 +12,11 @@ import io
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
 
 from twisted.model.registry import ModelError
 from twisted.sim import Curve
 from twisted.store.db import Store
+from twisted.store.models import by_id_or_newest
 from twisted.store.rl import RlCheckpoint
 from twisted.topology import PData
 
@@ -87,18 +87,11 @@ def load_policy(store: Store, model_id: int | None = None) -> tuple[Any, int]:
             f"the sac planner needs the rl extra ({exc.name} is missing): pip install 'twisted-knots[rl]'"
         ) from exc
     with store.session() as session:
-        if model_id is not None:
-            row = session.get(RlCheckpoint, model_id)
-            if row is None:
-                known = session.scalars(select(RlCheckpoint.id).order_by(RlCheckpoint.id)).all()
-                raise PolicyError(
-                    f"there is no SAC policy {model_id} in the database (policies: {list(known) or 'none'}); "
-                    "see `twisted rl list`"
-                )
-        else:
-            row = session.scalars(select(RlCheckpoint).order_by(RlCheckpoint.id.desc()).limit(1)).first()
-            if row is None:
-                raise PolicyError("the database holds no SAC policy: train one with `twisted rl train`")
+        row = by_id_or_newest(
+            session, RlCheckpoint, model_id, what="SAC policy", see="twisted rl list", error=PolicyError
+        )
+        if row is None:
+            raise PolicyError("the database holds no SAC policy: train one with `twisted rl train`")
         blob, checkpoint_id = row.policy, row.id
     try:
         # Inference needs no environment: a one-slot plain buffer replaces the HER buffer (which needs one).
