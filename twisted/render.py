@@ -48,8 +48,11 @@ __all__ = [
     "draw_gauss_diagram",
     "draw_knot_diagram",
     "gl_top_views",
+    "knot_zoom",
+    "rope_pieces",
     "save_gif",
     "save_png",
+    "visit_labels",
 ]
 
 GL_BACKENDS = ("egl", "osmesa")
@@ -139,6 +142,46 @@ def _piece(points: npt.NDArray[np.float64], s0: float, s1: float) -> npt.NDArray
     return np.stack([xs, ys], axis=1)
 
 
+def rope_pieces(
+    points: npt.NDArray[np.float64], crossings: Sequence[CrossingDrawing]
+) -> list[npt.NDArray[np.float64]]:
+    """The projected rope as the polylines a knot diagram draws: broken around each under-crossing."""
+    s = _arc_length(points)
+    under_at = sorted(
+        s[c.under_segment] + c.under_t * (s[c.under_segment + 1] - s[c.under_segment]) for c in crossings
+    )
+    cuts = [0.0]
+    for sc in under_at:
+        cuts += [sc - _GAP_M, sc + _GAP_M]
+    cuts.append(float(s[-1]))
+    return [_piece(points, a, b) for a, b in zip(cuts[0::2], cuts[1::2], strict=True) if b > a]
+
+
+def knot_zoom(
+    points: npt.NDArray[np.float64], crossings: Sequence[CrossingDrawing]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+    """The (lower, upper) corners of a close-up on the crossings when the knot is small against the
+    rope, else None (show the whole rope)."""
+    if not crossings:
+        return None
+    span = float(np.ptp(points[:, :2], axis=0).max()) or 1.0
+    xy = np.array([c.xy for c in crossings])
+    lo, hi = xy.min(axis=0) - _ZOOM_MARGIN_M, xy.max(axis=0) + _ZOOM_MARGIN_M
+    return (lo, hi) if float((hi - lo).max()) < 0.6 * span else None
+
+
+def visit_labels(
+    points: npt.NDArray[np.float64], c: CrossingDrawing
+) -> tuple[tuple[str, npt.NDArray[np.float64]], ...]:
+    """The two visit labels of a crossing (``3O+``, ``4U+``), each with the unit direction (on the
+    table) from the crossing to where it goes: along its own strand, the under one on the side
+    farther from the over one."""
+    d_o = _unit(points[c.over_segment + 1, :2] - points[c.over_segment, :2])
+    d_u = _unit(points[c.under_segment + 1, :2] - points[c.under_segment, :2])
+    s_u = 1.0 if np.linalg.norm(d_o - d_u) >= np.linalg.norm(d_o + d_u) else -1.0
+    return (f"{c.over_visit}O{c.sign}", d_o), (f"{c.under_visit}U{c.sign}", s_u * d_u)
+
+
 def draw_knot_diagram(
     ax: Axes, points: npt.ArrayLike, *, title: str | None = None, label_visits: bool = True, zoom: bool = True
 ) -> list[CrossingDrawing]:
@@ -149,42 +192,22 @@ def draw_knot_diagram(
     the panel).
     """
     pts = np.asarray(points, dtype=np.float64)
-    s = _arc_length(pts)
     crossings = crossing_geometry(pts)
-    # The under strand is drawn in pieces that stop short of each under-crossing.
-    under_at = sorted(
-        s[c.under_segment] + c.under_t * (s[c.under_segment + 1] - s[c.under_segment]) for c in crossings
-    )
-    cuts = [0.0]
-    for sc in under_at:
-        cuts += [sc - _GAP_M, sc + _GAP_M]
-    cuts.append(float(s[-1]))
-    for a, b in zip(cuts[0::2], cuts[1::2], strict=True):
-        if b > a:
-            piece = _piece(pts, a, b)
-            ax.plot(piece[:, 0], piece[:, 1], color=ROPE_COLOUR, lw=4, solid_capstyle="round", zorder=2)
+    for piece in rope_pieces(pts, crossings):
+        ax.plot(piece[:, 0], piece[:, 1], color=ROPE_COLOUR, lw=4, solid_capstyle="round", zorder=2)
     ax.plot(pts[0, 0], pts[0, 1], "o", color="black", ms=8, zorder=4, label="head (link 0)")
     ax.plot(pts[-1, 0], pts[-1, 1], "o", mfc="white", mec="black", ms=8, zorder=4, label="tail (link 20)")
-    span = float(np.ptp(pts[:, :2], axis=0).max()) or 1.0
-    view = None
-    if zoom and crossings:
-        xy = np.array([c.xy for c in crossings])
-        lo, hi = xy.min(axis=0) - _ZOOM_MARGIN_M, xy.max(axis=0) + _ZOOM_MARGIN_M
-        if float((hi - lo).max()) < 0.6 * span:
-            view = (lo, hi)
-            span = float((hi - lo).max())
+    view = knot_zoom(pts, crossings) if zoom else None
+    lo, hi = view if view is not None else (pts[:, :2].min(axis=0), pts[:, :2].max(axis=0))
+    span = float((hi - lo).max()) or 1.0
     if label_visits:
         off = max(0.07 * span, 0.012)
         for c in crossings:
             x, y = c.xy
             ax.plot(x, y, ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
-            d_o = _unit(pts[c.over_segment + 1, :2] - pts[c.over_segment, :2])
-            d_u = _unit(pts[c.under_segment + 1, :2] - pts[c.under_segment, :2])
-            # each label sits on its own strand; the under one on the side farther from the over one
-            s_u = 1.0 if np.linalg.norm(d_o - d_u) >= np.linalg.norm(d_o + d_u) else -1.0
-            for visit, kind, direction in ((c.over_visit, "O", d_o), (c.under_visit, "U", s_u * d_u)):
+            for text, direction in visit_labels(pts, c):
                 ax.annotate(
-                    f"{visit}{kind}{c.sign}",
+                    text,
                     (x + off * direction[0], y + off * direction[1]),
                     ha="center",
                     va="center",

@@ -1,0 +1,281 @@
+"""`twisted browse` (issue 35): the store in Datasette with rope and knot pictures.
+
+A tiny store (a real planner run that reaches a one-crossing goal, and a collected rope that ties a
+trefoil) is served by the real command in a subprocess on a free port of 127.0.0.1; the runs table,
+the tree query and the knots-tied query are fetched over HTTP and must carry their SVG pictures; the
+server is then stopped. The pictures themselves are checked against the P-data they draw, and the
+command's input checks (port, extra, PostgreSQL) exit 2 before anything starts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.parse
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from twisted.browse.svg import KNOT_WORDS, blob_points, gauss_svg, knot_words, rope_svg
+from twisted.knots.catalogue import CATALOGUE
+from twisted.render import crossing_geometry, rope_pieces
+from twisted.store import open_store
+from twisted.store.queries import add_configuration, start_run
+from twisted.topology import parse_p_data, top
+
+ONE = parse_p_data([[1, "O", 2, "+"], [2, "U", 1, "+"]])
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _trefoil_rope() -> np.ndarray:
+    """22 link points of an open trefoil (the standard parametrisation, ends left apart), 3 crossings."""
+    t = np.linspace(0.25, 2 * np.pi - 0.25, 22)
+    x = 0.05 * (np.sin(t) + 2 * np.sin(2 * t))
+    y = 0.05 * (np.cos(t) - 2 * np.cos(2 * t))
+    return np.stack([x, y, 0.02 - 0.01 * np.sin(3 * t)], axis=1)
+
+
+# ------------------------------------------------------------------ the pictures
+
+
+def test_rope_picture_draws_the_crossings_of_its_state() -> None:
+    points = _trefoil_rope()
+    p = top(points)
+    assert p.cross == 3
+    svg = rope_svg(points.astype("<f8").tobytes())
+    assert svg is not None and svg.startswith("<svg") and svg.endswith("</svg>")
+    labels = re.findall(r">(\d+[OU][+-])</text>", svg)
+    assert sorted(labels) == sorted(f"{v.position}{v.over}{v.sign}" for v in p.visits)
+    # the rope broken at each under-crossing (a piece shorter than the gap, at an end, is left out)
+    assert svg.count("<polyline") == len(rope_pieces(points, crossing_geometry(points))) >= p.cross
+    assert p.key.replace('"', "&quot;") in svg  # the state is the tooltip
+
+
+def test_gauss_picture_has_one_arc_per_crossing() -> None:
+    p = top(_trefoil_rope())
+    svg = gauss_svg(p.key)
+    assert svg.count("<path") == p.cross and svg.count("<polygon") == p.cross  # arcs and arrow heads
+    assert re.findall(r">(\d+[OU])</text>", svg) == [f"{v.position}{v.over}" for v in p.visits]
+    assert gauss_svg("[]").count("<path") == 0
+
+
+def test_only_link_points_are_drawn() -> None:
+    good = _trefoil_rope().astype("<f8").tobytes()
+    assert blob_points(good) is not None
+    assert blob_points(good[:-8]) is None  # not a whole number of points
+    assert blob_points(b"") is None and blob_points("text") is None
+    assert blob_points(np.full((22, 3), np.nan).tobytes()) is None
+    assert rope_svg(b"\x00" * 7) is None
+
+
+def test_every_catalogue_knot_has_words() -> None:
+    assert set(CATALOGUE) <= set(KNOT_WORDS)
+    assert "trefoil" in (knot_words("3_1+") or "")
+    assert knot_words("nonsense") is None and knot_words(3) is None
+
+
+# ------------------------------------------------------------------ the command's checks
+
+
+def _cli(*args: str) -> tuple[int, str]:
+    from cli.main import app
+
+    result = CliRunner().invoke(app, list(args))
+    assert result.exception is None or isinstance(result.exception, SystemExit), result.output
+    return result.exit_code, " ".join(result.output.split())
+
+
+@pytest.mark.parametrize("port", ["0", "65536", "-3", "http"])
+def test_a_bad_port_exits_2(sqlite_url: str, port: str) -> None:
+    code, out = _cli("--db", sqlite_url, "browse", "--port", port)
+    assert code == 2 and "'--port'" in out
+    assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
+
+
+def test_a_port_in_use_exits_2(sqlite_url: str) -> None:
+    pytest.importorskip("datasette")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        code, out = _cli("--db", sqlite_url, "browse", "--port", str(port))
+    assert code == 2 and f"--port {port}: cannot listen on 127.0.0.1:{port}" in out
+    assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
+
+
+def test_without_datasette_the_message_names_the_extra(
+    sqlite_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "datasette", None)  # as if not installed: find_spec gives None
+    code, out = _cli("--db", sqlite_url, "browse")
+    assert code == 2 and "pip install 'twisted-knots[browse]'" in out
+
+
+def test_postgresql_and_missing_stores_are_refused(tmp_path: Path) -> None:
+    pytest.importorskip("datasette")
+    code, out = _cli("--db", "postgresql+psycopg://nobody@127.0.0.1:1/none", "browse", "--port", "1")
+    assert code == 2 and "only an SQLite store can be browsed" in out
+    code, out = _cli("--db", f"sqlite:///{tmp_path / 'none.db'}", "browse", "--port", str(_free_port()))
+    assert code == 2 and "does not exist" in out
+    assert not (tmp_path / "none.db").exists()
+
+
+# ------------------------------------------------------------------ the server
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, int]:
+    """(file, plan run id, collect run id): a solved planner run and a collected trefoil."""
+    pytest.importorskip("datasette")
+    from twisted.planner import PlannerOptions, start_search
+    from twisted.sim import SimPool
+
+    path = tmp_path_factory.mktemp("browse") / "store.db"
+    with open_store(f"sqlite:///{path}") as opened:
+        with SimPool(1) as pool:
+            search = start_search(opened, ONE, PlannerOptions(planner="random-low", seed=0), pool)
+            result = search.run(max_iterations=400)
+        assert result.solved  # deterministic for this seed (tests/test_render.py)
+        rope = _trefoil_rope()
+        with opened.session(write=True) as session:
+            collect_id = start_run(session, "collect", {}).id
+            add_configuration(session, run_id=collect_id, p_data=top(rope), q=np.zeros(4), points=rope)
+    return path, result.run_id, collect_id
+
+
+@pytest.fixture(scope="module")
+def server(store: tuple[Path, int, int]) -> Iterator[tuple[str, subprocess.Popen[str], str]]:
+    """`twisted browse` on a free port: (base URL, the process, the file's digest before serving)."""
+    path = store[0]
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    port = _free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cli.main", "--db", f"sqlite:///{path}", "browse", "--port", str(port)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120  # start-up on a busy machine; not a speed check
+        while True:
+            assert proc.poll() is None, proc.communicate()[0]
+            try:
+                # the port listens before the app is up (bound first): a request waits in its queue
+                with urllib.request.urlopen(f"{base}/-/versions.json", timeout=30):
+                    break
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                assert time.monotonic() < deadline, "twisted browse did not start"
+                time.sleep(0.3)
+        yield base, proc, digest
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(timeout=60)
+
+
+def _get(url: str) -> tuple[int, str, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=60) as response:
+            return response.status, response.headers.get("Content-Type", ""), response.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.headers.get("Content-Type", ""), exc.read()
+
+
+def _page(url: str) -> str:
+    status, _, body = _get(url)
+    assert status == 200, body[:2000]
+    return body.decode()
+
+
+def test_the_runs_table_links_a_plan_run_to_its_tree_and_pictures(server, store) -> None:
+    base, _, _ = server
+    _, plan_id, collect_id = store
+    html = _page(f"{base}/twisted/runs")
+    assert f"/twisted/run_tree?run_id={plan_id}" in html
+    assert f"/-/twisted/runs/{plan_id}/plan.gif" in html
+    assert f"/twisted/configurations?run_id={collect_id}" in html
+    status, content_type, gif = _get(f"{base}/-/twisted/runs/{plan_id}/plan.gif")
+    assert status == 200 and content_type == "image/gif" and gif[:6] == b"GIF89a"
+    status, _, body = _get(f"{base}/-/twisted/runs/{collect_id}/plan.png")
+    assert status == 404 and b"not a planner run" in body
+
+
+def test_the_tree_query_draws_every_node(server, store) -> None:
+    base, _, _ = server
+    path, plan_id, _ = store
+    with open_store(f"sqlite:///{path}", readonly=True) as opened:
+        from twisted.store.search import load_run, solution_path
+
+        info = load_run(opened, plan_id)
+        assert info is not None
+        nodes, plan = info.nodes, solution_path(opened, plan_id)
+    html = _page(f"{base}/twisted/run_tree?run_id={plan_id}")
+    assert html.count('class="twisted-rope"') == len(nodes) > 1
+    assert len(re.findall(r"<td class=\"col-on_plan[^>]*>plan</td>", html)) == len(plan)
+    assert _page(f"{base}/twisted/run_tree?run_id={plan_id}&page=2").count("<svg") == 0
+
+
+def test_the_knots_tied_query_shows_the_trefoil(server, store) -> None:
+    base, _, _ = server
+    _, _, collect_id = store
+    html = _page(f"{base}/twisted/knots_tied")
+    assert "3_1-" in html and "trefoil (overhand knot), left-handed" in html
+    assert html.count('class="twisted-rope"') == 1
+    key = top(_trefoil_rope()).key
+    states = _page(f"{base}/twisted/topological_states")
+    assert urllib.parse.urlencode({"key": key}).replace("&", "&amp;") in states  # its link to the ropes
+    reached = _page(f"{base}/twisted/state_reached_by?{urllib.parse.urlencode({'key': key})}")
+    assert reached.count('class="twisted-rope"') == 1 and f">{collect_id}</a>" in reached
+
+
+def test_states_show_their_gauss_diagram_and_full_drawing(server) -> None:
+    base, _, _ = server
+    html = _page(f"{base}/twisted/topological_states")
+    assert html.count('class="twisted-gauss"') == html.count('class="twisted-rope"') >= 3  # each has a rope
+    status, content_type, svg = _get(f"{base}/-/twisted/state.svg?{urllib.parse.urlencode({'key': ONE.key})}")
+    assert status == 200 and content_type == "image/svg+xml" and b"<svg" in svg[:1000]
+    assert _get(f"{base}/-/twisted/state.svg?key=nonsense")[0] == 400
+
+
+def test_the_other_canned_queries_answer(server) -> None:
+    base, _, _ = server
+    columns = {"states_most_reached": "p_data", "pull_tests": "pulled_points", "eval_labels": "label"}
+    for name, column in {**columns, "eval_goals.json?set_name=x&label=y": "plan_run_id"}.items():
+        if "?" not in name:
+            name += ".json"
+        status, _, body = _get(f"{base}/twisted/{name}")
+        assert status == 200 and column in json.loads(body)["columns"]  # the SQL runs on this schema
+    assert len(json.loads(_page(f"{base}/twisted/states_most_reached.json"))["rows"]) >= 3
+
+
+def test_the_server_listens_on_localhost_only_reads_and_stops(server, store) -> None:
+    base, proc, digest = server
+    port = int(base.rsplit(":", 1)[1])
+    tcp = Path("/proc/net/tcp")
+    if tcp.exists():  # Linux: the listening socket's local address is 127.0.0.1 (0100007F)
+        listening = [line.split()[1] for line in tcp.read_text().splitlines()[1:] if line.split()[3] == "0A"]
+        assert f"0100007F:{port:04X}" in listening
+        assert not any(a.endswith(f":{port:04X}") and a != f"0100007F:{port:04X}" for a in listening)
+    _page(f"{base}/twisted/search_nodes")
+    proc.terminate()
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and "stopped (SIGTERM)" in out, out
+    assert hashlib.sha256(store[0].read_bytes()).hexdigest() == digest  # served read-only
