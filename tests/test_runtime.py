@@ -109,8 +109,15 @@ def test_the_simulation_imports_mujoco_without_opengl() -> None:
     assert proc.stdout.split() == ["True", "False"]
 
 
-def test_cpu_cores_is_positive() -> None:
-    assert runtime.cpu_cores() >= 1
+def test_cpu_cores_are_the_cores_this_process_may_use_not_the_machines() -> None:
+    """The default number of workers follows the CPU affinity (taskset, a container's cpuset), which can
+    be fewer than the machine has: a child limited to one core counts one."""
+    assert runtime.cpu_cores() == len(os.sched_getaffinity(0))
+    code = "import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); from twisted import runtime; "
+    code += "print(runtime.cpu_cores())"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "1"
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
