@@ -11,6 +11,7 @@ from rich.table import Table
 
 from cli.app import EXIT_BAD_INPUT, app, check_workers, console, fail, open_db, seed_option
 from cli.options import json_option, print_json, ray_address_argument
+from twisted.rope import MAX_CROSSINGS
 from twisted.runtime import signal_exit_code
 
 EXIT_FAILED = 1
@@ -44,7 +45,9 @@ def collect_command(
     batch_size: int = typer.Option(
         20, "--batch-size", help="Kept transitions per committed batch (also ~2 s)."
     ),
-    max_cross: int = typer.Option(6, "--max-cross", help="Keep transitions up to this many crossings."),
+    max_cross: int = typer.Option(
+        MAX_CROSSINGS, "--max-cross", help="Keep transitions up to this many crossings."
+    ),
     cross_bias: float = typer.Option(
         1.0,
         "--cross-bias",

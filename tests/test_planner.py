@@ -41,7 +41,7 @@ from twisted.runtime import StopSignals
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.search import SearchCheckpoint, SearchNode, SearchRunRow, load_run
-from twisted.topology import EMPTY, parse_p_data
+from twisted.topology import EMPTY, PData, parse_p_data
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
 # a 3-crossing goal that random curves do not reach in seconds (for the kill / resume cycle)
@@ -502,11 +502,16 @@ def test_bad_goals_exit_2(tmp_path: Path, goal: str) -> None:
     assert "goal" in out.lower()
 
 
-def test_goal_limit_is_what_the_model_encodes() -> None:
-    from twisted.goals import MAX_GOAL_CROSS
-    from twisted.model.encoding import MAX_CROSSINGS
+def test_a_goal_at_the_crossing_limit_is_taken_and_encoded_and_one_beyond_is_refused() -> None:
+    from twisted.model.encoding import encode_p_data
+    from twisted.rope import MAX_CROSSINGS
 
-    assert MAX_GOAL_CROSS == MAX_CROSSINGS
+    def loops(n: int) -> PData:
+        return PData.from_crossings([(2 * k + 1, 2 * k + 2, 1) for k in range(n)])
+
+    assert np.isfinite(encode_p_data(check_goal(loops(MAX_CROSSINGS)))).all()
+    with pytest.raises(PlanInputError, match=f"the inverse model encodes at most {MAX_CROSSINGS}"):
+        check_goal(loops(MAX_CROSSINGS + 1))
 
 
 def test_bad_run_ids_and_missing_model_exit_2(tmp_path: Path) -> None:

@@ -17,7 +17,8 @@ from typer.testing import CliRunner
 from cli.main import app
 from twisted.knots import identify
 from twisted.planner import straight_rope
-from twisted.sim.mjcf import LINK_RADIUS_M, ROPE_LENGTH_M
+from twisted.rope import ROPE_LENGTH_M
+from twisted.sim.mjcf import LINK_RADIUS_M
 from twisted.store import open_store
 from twisted.store.knots import tightenings
 from twisted.tighten import Tightened, tighten, tightening_sim

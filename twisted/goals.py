@@ -10,7 +10,7 @@ the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@
 (``knot:overhand@3``). Problem sets, evaluation results and planner runs store that text.
 
 What a person types (``--goal``, ``--knot``, ``--crossings``) becomes a goal through :func:`make_goal`,
-which also checks that the inverse model can encode it (:data:`MAX_GOAL_CROSS`) and raises
+which also checks that the inverse model can encode it (:data:`twisted.rope.MAX_CROSSINGS`) and raises
 :class:`PlanInputError` saying which input is wrong.
 """
 
@@ -23,13 +23,13 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
+from twisted.rope import MAX_CROSSINGS
 from twisted.topology import PData
 
 __all__ = [
     "Goal",
     "GoalError",
     "KNOT_PREFIX",
-    "MAX_GOAL_CROSS",
     "PlanInputError",
     "check_goal",
     "crossing_number",
@@ -44,8 +44,6 @@ KNOT_PREFIX = "knot:"
 # inverse model encodes at most 6.
 MAX_KNOT_CROSSINGS = 5
 _KNOT_SPEC = re.compile(r"^knot:(?P<name>[^@\s]+)@(?P<crossings>\d+)$")
-# The model encodes goals of up to 6 crossings (docs/DESIGN.md section 6.1: the reference truncated to 3).
-MAX_GOAL_CROSS = 6
 
 
 class GoalError(ValueError):
@@ -217,7 +215,7 @@ def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
         raise GoalError(str(exc)) from None
 
 
-def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_GOAL_CROSS) -> PData:
+def check_goal(goal: str | Sequence[Any] | PData, max_cross: int = MAX_CROSSINGS) -> PData:
     """Parse ``goal``; check that a rope can have it and the model can encode it (else PlanInputError)."""
     from twisted.moves import parse_state
     from twisted.topology import PDataError
@@ -239,7 +237,7 @@ def make_goal(
     goal: str | Sequence[Any] | PData | None = None,
     knot: str | None = None,
     crossings: int | None = None,
-    max_cross: int = MAX_GOAL_CROSS,
+    max_cross: int = MAX_CROSSINGS,
 ) -> Goal:
     """The goal of a search: one P-data state (``goal``, or a ``knot:<name>@<n>`` spec) or a knot by name.
 

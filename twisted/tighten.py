@@ -30,7 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.knots import RopeKnot, identify
-from twisted.sim.mjcf import LINK_RADIUS_M, ROPE_LENGTH_M
+from twisted.rope import ROPE_LENGTH_M
+from twisted.sim.mjcf import LINK_RADIUS_M
 from twisted.sim.rope import WORKSPACE_RADIUS_M, RopeSim, minimum_jerk
 from twisted.topology import PData, PDataError, top
 

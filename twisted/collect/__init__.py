@@ -38,7 +38,6 @@ from twisted.collect.driver import CollectRun
 from twisted.collect.loop import Budget, CollectLoop, DQIndex, ensure_root
 from twisted.collect.options import (
     ACROSS_SHARE,
-    MAX_ENCODED_CROSS,
     MAX_HOURS,
     RUN_KIND,
     CollectError,
@@ -51,7 +50,6 @@ from twisted.collect.stats import REFERENCE_PLUS_ONE_RATE, collection_stats
 
 __all__ = [
     "ACROSS_SHARE",
-    "MAX_ENCODED_CROSS",
     "MAX_HOURS",
     "REFERENCE_PLUS_ONE_RATE",
     "RUN_KIND",

@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from twisted.rope import MAX_CROSSINGS
+
 RUN_KIND = "collect"
-MAX_ENCODED_CROSS = 6  # the inverse model encodes goals of up to 6 crossings
 MAX_HOURS = 1e5  # more is a typo (and overflows the clock arithmetic near 1e308)
 ACROSS_SHARE = 0.8  # bench/bench_collect_curves.py: kept per hour per core, uniform vs across curves
 
@@ -24,7 +25,7 @@ class CollectOptions:
     seed: int | None = None
     batch_size: int = 20
     batch_seconds: float = 2.0
-    max_cross: int = MAX_ENCODED_CROSS
+    max_cross: int = MAX_CROSSINGS  # what the inverse model encodes
     cross_bias: float = 1.0
     max_kept: int | None = None
     max_tries: int | None = None

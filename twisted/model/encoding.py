@@ -29,6 +29,7 @@ import numpy.typing as npt
 import torch
 
 from twisted.moves import Move
+from twisted.rope import MAX_CROSSINGS, ROPE_LENGTH_M
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, N_POINTS
 from twisted.topology import PData, Visit
 
@@ -59,7 +60,6 @@ __all__ = [
     "target_to_curve",
 ]
 
-MAX_CROSSINGS = 6
 MAX_VISITS = 2 * MAX_CROSSINGS
 # per visit: present, over(+1)/under(-1), sign +-1, partner one-hot, (partner - position) / MAX_VISITS
 VISIT_DIM = 4 + MAX_VISITS
@@ -74,7 +74,7 @@ GEOMETRY_DIM = 3 * N_POINTS + CROSSING_DIM + VISIT_GEOMETRY_DIM
 # per link: centre (3), planar direction (2), index / 20, crossing-matrix row (2 x 21), visit slots on it
 LINK_TOKEN_DIM = 3 + 2 + 1 + 2 * N_SEGMENTS + MAX_VISITS
 
-XY_SCALE_M = 0.5 * N_LINKS * 0.04  # half the rope length: canonical points lie in about [-1, 1]
+XY_SCALE_M = 0.5 * ROPE_LENGTH_M  # half the rope length: canonical points lie in about [-1, 1]
 Z_REST_M = 0.01  # a link lying on the table (its radius)
 Z_SCALE_M = 0.01  # one radius: a strand lying on another sits about one unit up
 

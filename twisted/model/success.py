@@ -24,6 +24,7 @@ from sqlalchemy import select
 
 from twisted.model.data import split_by_start
 from twisted.model.network import InverseModel
+from twisted.rope import MAX_CROSSINGS
 from twisted.sim import Curve, sample_curve
 from twisted.sim.pool import SimPool
 from twisted.store.db import Store
@@ -56,7 +57,7 @@ def held_out_transitions(
     per_step: int,
     rng: np.random.Generator,
     steps: Sequence[str] = ("0->1", "1->2", "2->3", "+2"),
-    max_cross: int = 6,
+    max_cross: int = MAX_CROSSINGS,
     side: str = "held_out",
 ) -> list[HeldOut]:
     """Up to ``per_step`` held-out transitions of each step kind, drawn uniformly (see module doc).

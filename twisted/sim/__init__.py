@@ -14,7 +14,7 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-from twisted.sim.mjcf import N_LINKS, N_POINTS  # noqa: E402
+from twisted.rope import N_LINKS, N_POINTS  # noqa: E402
 from twisted.sim.pool import SimPool, SimResult, simulate  # noqa: E402
 from twisted.sim.rope import CURVE_HIGH, CURVE_LOW, Curve, CurveOutcome, RopeSim, sample_curve  # noqa: E402
 

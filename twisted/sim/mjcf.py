@@ -17,14 +17,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-N_LINKS = 21
-N_POINTS = N_LINKS + 1
+# the link count and spacing (centre to centre) of the one rope: twisted.rope.ROPE
+from twisted.rope import LINK_SPACING_M, N_LINKS
+
 MIDDLE_LINK = N_LINKS // 2
 
 LINK_RADIUS_M = 0.01
 LINK_HALF_LENGTH_M = 0.015  # capsule cylinder half-length; the caps overlap the neighbours
-LINK_SPACING_M = 0.04  # centre to centre; the rope is N_LINKS * spacing = 0.84 m long
-ROPE_LENGTH_M = N_LINKS * LINK_SPACING_M
 FRICTION = (1.0, 0.005, 0.0001)  # MuJoCo's default (sliding, torsional, rolling)
 
 

@@ -17,10 +17,9 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 
+from twisted.rope import N_LINKS, N_POINTS
 from twisted.sim.mjcf import (
     LINK_RADIUS_M,
-    N_LINKS,
-    N_POINTS,
     TAIL_GRIPPER,
     TAIL_WELD,
     RopeParams,
