@@ -391,13 +391,24 @@ def test_mirror_and_reverse_state_give_the_transformed_link_points() -> None:
 
 
 def test_mirrored_and_reversed_transitions_reach_the_transformed_state_in_most_cases() -> None:
-    """Physics is symmetric up to chaos: a transformed start and curve give the transformed result."""
+    """Physics is symmetric up to chaos: a transformed start and curve give the transformed result. A
+    rate over several seeds (each its own random starts and curves), not one seed's handful of cases."""
     sim = RopeSim()
-    rng = np.random.default_rng(11)
-    starts = _random_states(sim, rng, 24)[::2]
     same = {"mirror": 0, "reverse": 0}
     total = 0
-    for state in starts:
+    for seed in (11, 12, 13):
+        rng = np.random.default_rng(seed)
+        total += _transformed_cases(sim, rng, same)
+    assert total >= 24
+    assert same["mirror"] >= 0.6 * total, same
+    assert same["reverse"] >= 0.6 * total, same
+
+
+def _transformed_cases(sim: RopeSim, rng: np.random.Generator, same: dict[str, int]) -> int:
+    """Simulate random curves from random starts and their mirrored / reversed twins; count into ``same``
+    the twins that reach the transformed state; return the number of valid cases."""
+    total = 0
+    for state in _random_states(sim, rng, 24)[::2]:
         curve = sample_curve(rng)
         sim.set_state(state)
         if not sim.apply(curve).ok:
@@ -411,6 +422,4 @@ def test_mirrored_and_reversed_transitions_reach_the_transformed_state_in_most_c
             sim.set_state(f_state(sim, state))
             ok = sim.apply(Curve.from_array(f_curve(curve.to_array()))).ok
             same[name] += bool(ok and sim.p_data() == f_p)
-    assert total >= 8
-    assert same["mirror"] >= 0.6 * total, same
-    assert same["reverse"] >= 0.6 * total, same
+    return total

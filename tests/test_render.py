@@ -112,7 +112,8 @@ def test_run_renders_png_and_gif(sqlite_url: str, tmp_path: Path) -> None:
         with SimPool(1) as pool:
             search = start_search(store, ONE, PlannerOptions(planner="random-low", seed=0), pool)
             result = search.run(max_iterations=400)
-        assert result.solved  # deterministic for this seed
+        # any seed: about 3 % of random curves make this one crossing, and 400 iterations draw 1,200 curves
+        assert result.solved
         out = render_run(store, result.run_id, tmp_path / "run.png", tmp_path / "run.gif", gl=False)
         png, gif = out.files
         assert png.read_bytes()[:8] == PNG and png.stat().st_size > 5000
