@@ -66,7 +66,10 @@ def train_command(
         2_000, "--checkpoint-every", min=1, help="Steps between checkpoints."
     ),
     replay_buffer: bool = typer.Option(
-        True, "--replay-buffer/--no-replay-buffer", help="Keep the replay buffer with the newest checkpoint."
+        True,
+        "--replay-buffer/--no-replay-buffer",
+        help="Keep the replay buffer with the newest checkpoint; with --resume: continue without the "
+        "stored one (e.g. one pickled by an earlier version, which is not read).",
     ),
     minutes: float | None = typer.Option(
         None, "--minutes", min=0.0, help="Stop (resumable) after this time."
@@ -139,6 +142,7 @@ def train_command(
                 resume_run_id=resume,
                 progress=on_progress,
                 time_limit_s=None if minutes is None else 60.0 * minutes,
+                read_replay_buffer=replay_buffer,
             )
         except (GoalError, ValueError) as exc:
             fail(str(exc), EXIT_BAD_INPUT)

@@ -370,6 +370,9 @@ def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: in
         model = load_model_file(path)
     except ModelError as exc:
         fail(f"--import {path}: {exc}")
+    broken = model.unusable()  # checked as a trained model is, before the store is opened
+    if broken:
+        fail(f"--import {path}: this model cannot plan: {broken}")
     store = open_db(ctx)
     new_id = save_model(store, model, name=label)
     console.print(

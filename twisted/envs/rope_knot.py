@@ -53,6 +53,7 @@ __all__ = [
     "RopeKnotEnv",
     "action_to_curve",
     "curve_to_action",
+    "env_spaces",
     "goal_pool",
     "observation_of",
 ]
@@ -71,6 +72,19 @@ class GoalError(ValueError):
 
 
 # ---- the action and observation mappings, shared with the planner's policy sampler -----------------
+
+
+def env_spaces() -> tuple[spaces.Dict, spaces.Box]:
+    """The observation and action spaces of :class:`RopeKnotEnv` (the same for every goal source)."""
+    goal_box = spaces.Box(-1.0, 1.0, shape=(P_DATA_DIM,), dtype=np.float32)
+    observation = spaces.Dict(
+        {
+            "observation": spaces.Box(-np.inf, np.inf, shape=(OBSERVATION_DIM,), dtype=np.float32),
+            "achieved_goal": goal_box,
+            "desired_goal": goal_box,
+        }
+    )
+    return observation, spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
 
 
 def _frame(points: npt.ArrayLike) -> tuple[npt.NDArray[np.float32], float, float]:
@@ -239,15 +253,7 @@ class RopeKnotEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._counts = sorted(self._by_cross)
         self.max_curves = int(max_curves)
         self.sim = RopeSim(friction_scale=friction_scale)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
-        goal_box = spaces.Box(-1.0, 1.0, shape=(P_DATA_DIM,), dtype=np.float32)
-        self.observation_space = spaces.Dict(  # type: ignore[assignment]
-            {
-                "observation": spaces.Box(-np.inf, np.inf, shape=(OBSERVATION_DIM,), dtype=np.float32),
-                "achieved_goal": goal_box,
-                "desired_goal": goal_box,
-            }
-        )
+        self.observation_space, self.action_space = env_spaces()  # type: ignore[assignment]
         self.goal: PData = self.goals[0]
         self.p_data: PData = self.sim.p_data()
         self.curves = 0

@@ -54,6 +54,7 @@ from twisted.model.encoding import (
 )
 from twisted.moves import Move, explains
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve
+from twisted.store.payloads import UnsafePayloadError, load_tensors
 from twisted.topology import PData, parse_p_data, top
 
 __all__ = ["Condition", "InverseModel", "InverseNet", "LINK_WEIGHT"]
@@ -304,6 +305,34 @@ class InverseModel:
                 f"got {self.oversample} and {self.link_temperature}"
             )
 
+    def unusable(self) -> str | None:
+        """Why this model cannot plan (NaN or infinite weights or losses, or a forward pass on the
+        straight rope that gives non-finite probabilities or curves), in words; None when it can.
+
+        What an imported model must pass before it is stored, as a trained one is checked."""
+        for name, values in self.net.state_dict().items():
+            if torch.is_floating_point(values) and not bool(torch.isfinite(values).all()):
+                return f"its weights {name} hold NaN or infinity"
+        metrics = self.metadata.get("metrics", {}) or {}
+        for name in ("val_loss", "train_loss"):
+            value = metrics.get(name) if isinstance(metrics, dict) else None
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
+                return f"its {name.replace('_', ' ')} is {value}"
+        straight = np.stack(
+            [np.linspace(-0.5, 0.5, N_LINKS + 1), np.zeros(N_LINKS + 1), np.full(N_LINKS + 1, 0.01)], 1
+        )
+        goal = parse_p_data('[[1,"O",2,"+"],[2,"U",1,"+"]]')
+        try:
+            probs = self.link_probabilities(straight, goal)
+            if not (np.all(np.isfinite(probs)) and abs(float(probs.sum()) - 1.0) < 1e-3):
+                return "its forward pass on the straight rope gives link probabilities that are not finite"
+            curves = self.sample(straight, None, goal, 4, np.random.default_rng(0))
+        except (ValueError, RuntimeError, FloatingPointError) as exc:
+            return f"its forward pass on the straight rope fails ({type(exc).__name__}: {exc})"
+        if not all(np.all(np.isfinite(c.to_array())) for c in curves):
+            return "its forward pass on the straight rope gives curves that are not finite"
+        return None
+
     def condition(self, p_now: PData, p_next: PData, move: Move | None = None) -> Condition:
         """The encoded condition (batch of one) for going from ``p_now`` to ``p_next`` by ``move``
         (default: the first move that does it, :func:`twisted.moves.explains`, as in training); cached."""
@@ -386,7 +415,9 @@ class InverseModel:
 
     @classmethod
     def from_bytes(cls, data: bytes, model_id: int | None = None) -> InverseModel:
-        blob = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+        blob = load_tensors(data, "the inverse model")  # tensors and plain data only (docs/security.md)
+        if not isinstance(blob, dict) or not {"config", "state_dict"} <= set(blob):
+            raise UnsafePayloadError("the inverse model is not one written by twisted (no config, weights)")
         version = int(blob.get("format_version", 1))
         if version != FORMAT_VERSION:
             raise ValueError(

@@ -44,6 +44,7 @@ from twisted.model.encoding import preprocess
 from twisted.model.network import Condition, InverseModel, InverseNet
 from twisted.store.db import Store
 from twisted.store.models import utcnow
+from twisted.store.payloads import UnsafePayloadError, load_tensors
 from twisted.store.training import Checkpoint, TrainingRun
 
 __all__ = [
@@ -300,6 +301,20 @@ def _save_checkpoint(
         )
 
 
+CHECKPOINT_KEYS = ("net", "optimizer", "epoch", "batch_index", "torch_rng")
+
+
+def _checkpoint_state(ckpt: Checkpoint, run_id: int, device: str) -> dict[str, Any]:
+    """The trainer state in ``ckpt``, read as tensors and plain data only (a crafted pickle is refused:
+    :class:`UnsafePayloadError`, a ValueError), with the entries a resume needs."""
+    what = f"checkpoint {ckpt.id} of training run {run_id}"
+    state = load_tensors(ckpt.payload, what, map_location=device)
+    missing = [k for k in CHECKPOINT_KEYS if k not in state] if isinstance(state, dict) else CHECKPOINT_KEYS
+    if missing:
+        raise UnsafePayloadError(f"{what} is not a trainer state (it lacks {', '.join(missing)})")
+    return state
+
+
 def _latest_checkpoint(store: Store, run_id: int) -> Checkpoint | None:
     with store.session() as session:
         return session.scalars(
@@ -337,6 +352,9 @@ def train(
         config = TrainConfig.from_dict(run.parameters)
         max_id, run_id = run.max_transition_id, run.id
         history: list[Any] = list((run.metrics or {}).get("history", []))
+        ckpt = _latest_checkpoint(store, run_id)
+        # read (tensors and plain data only) and checked before anything is written
+        saved = None if ckpt is None else _checkpoint_state(ckpt, run_id, device)
         say(f"resuming training run {run_id} (epoch {run.epochs_done}, {run.elapsed_s:.0f} s done)")
     else:
         config = config or TrainConfig()
@@ -405,7 +423,8 @@ def train(
         len(val_data),
         config.to_dict(),
     )
-    ckpt = _latest_checkpoint(store, run_id) if resume else None
+    if not resume:
+        ckpt, saved = None, None
     init = None
     if ckpt is None and config.init_model_id is not None:
         if start_net is None:  # a resumed run that stopped before its first checkpoint
@@ -413,9 +432,12 @@ def train(
         init = start_net.state_dict()
     trainer = Trainer(train_data, config, device, init=init)
     elapsed_before = 0.0
-    if ckpt is not None:
-        state = torch.load(io.BytesIO(ckpt.payload), map_location=trainer.device, weights_only=False)
-        trainer.load_state_dict(state)
+    if ckpt is not None and saved is not None:
+        try:
+            trainer.load_state_dict(saved)
+        except (KeyError, TypeError, ValueError, RuntimeError, AttributeError, IndexError) as exc:
+            what = f"checkpoint {ckpt.id} of training run {run_id}"
+            raise UnsafePayloadError(f"{what} does not fit the run ({type(exc).__name__}: {exc})") from None
         elapsed_before = ckpt.elapsed_s
     elif init is not None and len(val_data):
         # the starting weights compete for "best": a fine-tuning that only gets worse on the new

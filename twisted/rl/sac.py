@@ -25,9 +25,19 @@ from sqlalchemy import delete, select
 
 from twisted.store.db import Store
 from twisted.store.models import utcnow
+from twisted.store.payloads import UnsafePayloadError, load_tensors
 from twisted.store.rl import RlCheckpoint, RlRun, RlSuccess, add_checkpoint, add_success
 
-__all__ = ["RlProgress", "SacConfig", "SacOutcome", "evaluate_policy", "make_env", "require_rl", "train_sac"]
+__all__ = [
+    "RlProgress",
+    "SacConfig",
+    "SacOutcome",
+    "evaluate_policy",
+    "inference_model",
+    "make_env",
+    "require_rl",
+    "train_sac",
+]
 
 
 def require_rl() -> None:
@@ -140,16 +150,269 @@ def _url(store: Store) -> str:
     return store.url.render_as_string(hide_password=False)
 
 
-def _policy_bytes(model: Any) -> bytes:
+# ---- stored policies and replay buffers: tensors and plain data only (docs/security.md) ---------------
+#
+# Stable-Baselines3's own ``save`` pickles parts of a model (spaces, schedules, the whole replay buffer),
+# and its ``load`` unpickles them: a crafted row would run code. What is stored instead is
+# ``torch.save`` of state dicts, tensors and numbers, read back with ``weights_only=True``
+# (:func:`twisted.store.payloads.load_tensors`) into a model rebuilt from the run's settings.
+
+POLICY_FORMAT = "twisted-sac-policy/1"
+BUFFER_FORMAT = "twisted-sac-buffer/1"
+# the arrays of a (Her/Dict)ReplayBuffer; observations are dicts of arrays
+BUFFER_ARRAYS = (
+    "observations",
+    "next_observations",
+    "actions",
+    "rewards",
+    "dones",
+    "timeouts",
+    "ep_start",
+    "ep_length",
+    "_current_ep_start",
+)
+MAX_SB3_ZIP_BYTES = 4 << 30  # what an old-format policy may unpack to
+
+
+def _torch_bytes(obj: Any) -> bytes:
+    import torch
+
     buf = io.BytesIO()
-    model.save(buf)
+    torch.save(obj, buf)
     return buf.getvalue()
 
 
+def _policy_bytes(model: Any) -> bytes:
+    """The policy, optimisers, entropy coefficient and counters of ``model`` (:data:`POLICY_FORMAT`)."""
+    from stable_baselines3.common.save_util import recursive_getattr
+
+    _, variables = model._get_torch_save_params()
+    return _torch_bytes(
+        {
+            "format": POLICY_FORMAT,
+            "params": model.get_parameters(),
+            "variables": {name: recursive_getattr(model, name).detach().cpu() for name in variables},
+            "counters": {
+                "num_timesteps": int(model.num_timesteps),
+                "n_updates": int(model._n_updates),
+                "episode_num": int(model._episode_num),
+            },
+        }
+    )
+
+
 def _buffer_bytes(model: Any) -> bytes:
-    buf = io.BytesIO()
-    model.save_replay_buffer(buf)
-    return zlib.compress(buf.getvalue(), 1)
+    """The replay buffer's arrays and position (:data:`BUFFER_FORMAT`), zlib-compressed."""
+    import numpy as np
+    import torch
+
+    rb = model.replay_buffer
+
+    def tensor(a: Any) -> Any:
+        return torch.from_numpy(np.ascontiguousarray(a))
+
+    arrays = {}
+    for name in BUFFER_ARRAYS:
+        value = getattr(rb, name, None)
+        if isinstance(value, dict):
+            arrays[name] = {k: tensor(v) for k, v in value.items()}
+        elif value is not None:
+            arrays[name] = tensor(value)
+    state = {"format": BUFFER_FORMAT, "pos": int(rb.pos), "full": bool(rb.full), "arrays": arrays}
+    return zlib.compress(_torch_bytes(state), 1)
+
+
+def _is_sb3_zip(blob: bytes) -> bool:
+    """Whether ``blob`` is a ``SAC.save`` archive (the format of earlier versions), not a torch file."""
+    import zipfile
+
+    if not zipfile.is_zipfile(io.BytesIO(blob)):
+        return False
+    with zipfile.ZipFile(io.BytesIO(blob)) as archive:
+        return "data" in archive.namelist() and "policy.pth" in archive.namelist()
+
+
+def read_policy(blob: bytes, what: str) -> dict[str, Any]:
+    """The stored policy state of :func:`_policy_bytes`, or of a ``SAC.save`` archive of earlier versions
+    (its state dicts read as tensors only, its JSON counters; its pickled entries are never decoded).
+
+    Raises :class:`UnsafePayloadError` (a ValueError) naming ``what`` for anything else.
+    """
+    if _is_sb3_zip(blob):
+        return _read_sb3_zip(blob, what)
+    state = load_tensors(blob, what)
+    if not (
+        isinstance(state, dict)
+        and state.get("format") == POLICY_FORMAT
+        and isinstance(state.get("params"), dict)
+        and isinstance(state.get("variables"), dict)
+        and isinstance(state.get("counters"), dict)
+    ):
+        raise UnsafePayloadError(f"{what} is not a SAC policy stored by twisted")
+    return state
+
+
+def _read_sb3_zip(blob: bytes, what: str) -> dict[str, Any]:
+    import json
+    import zipfile
+
+    with zipfile.ZipFile(io.BytesIO(blob)) as archive:
+        if sum(info.file_size for info in archive.infolist()) > MAX_SB3_ZIP_BYTES:
+            raise UnsafePayloadError(f"{what}: its archive unpacks to more than {MAX_SB3_ZIP_BYTES:,} bytes")
+        try:
+            data = json.loads(archive.read("data"))  # ":serialized:" entries (pickles) stay text
+        except ValueError as exc:
+            raise UnsafePayloadError(f"{what}: its settings are not JSON ({exc})") from None
+        params: dict[str, Any] = {}
+        variables: dict[str, Any] = {}
+        for name in archive.namelist():
+            if name.endswith(".pth"):
+                loaded = load_tensors(archive.read(name), f"{what} ({name})")
+                if name == "pytorch_variables.pth":
+                    variables = loaded if isinstance(loaded, dict) else {}
+                else:
+                    params[name.removesuffix(".pth")] = loaded
+    counters = {
+        key: data.get(field, 0) if isinstance(data, dict) else 0
+        for key, field in (
+            ("num_timesteps", "num_timesteps"),
+            ("n_updates", "_n_updates"),
+            ("episode_num", "_episode_num"),
+        )
+    }
+    return {"format": "sb3-zip", "params": params, "variables": variables, "counters": counters}
+
+
+def apply_policy(model: Any, state: dict[str, Any], what: str) -> None:
+    """Load :func:`read_policy`'s ``state`` into ``model`` (built with the run's settings); a state
+    that does not fit raises :class:`UnsafePayloadError`."""
+    import torch
+    from stable_baselines3.common.save_util import recursive_getattr
+
+    _, variables = model._get_torch_save_params()
+    try:
+        model.set_parameters(state["params"], exact_match=True, device=model.device)
+        for name, value in state["variables"].items():
+            if name not in variables or not isinstance(value, torch.Tensor):
+                raise ValueError(f"unexpected variable {name!r}")
+            with torch.no_grad():
+                recursive_getattr(model, name).copy_(value)
+        counters = state["counters"]
+        model.num_timesteps = int(counters["num_timesteps"])
+        model._n_updates = int(counters["n_updates"])
+        model._episode_num = int(counters["episode_num"])
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as exc:
+        raise UnsafePayloadError(
+            f"{what} does not fit a SAC model of its run ({type(exc).__name__}: {exc})"
+        ) from None
+
+
+def inference_model(blob: bytes, parameters: dict[str, Any], what: str) -> Any:
+    """The SAC model of a stored policy ``blob`` (:func:`read_policy`) for acting only: built from its
+    run's ``parameters`` without an environment (a one-slot plain buffer replaces the HER buffer)."""
+    require_rl()
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.buffers import DictReplayBuffer
+
+    from twisted.envs.rope_knot import env_spaces
+
+    state = read_policy(blob, what)
+    try:
+        config = SacConfig.from_dict(parameters)
+    except (TypeError, ValueError) as exc:
+        raise UnsafePayloadError(f"{what}: the settings of its run cannot be read ({exc})") from None
+    observation_space, action_space = env_spaces()
+    model = SAC(
+        "MultiInputPolicy",
+        None,  # type: ignore[arg-type]  # spaces set below, as SB3 does when it loads
+        learning_rate=config.learning_rate,
+        target_entropy=-float(action_space.shape[0]),  # SB3's "auto" (it reads the missing env)
+        buffer_size=1,
+        replay_buffer_class=DictReplayBuffer,
+        policy_kwargs={"net_arch": list(config.net_arch)},
+        device="cpu",
+        _init_setup_model=False,
+    )
+    model.observation_space, model.action_space = observation_space, action_space
+    model.n_envs = 1
+    model._setup_model()
+    apply_policy(model, state, what)
+    return model
+
+
+def _buffer_limit(rb: Any) -> int:
+    """The most bytes a stored copy of the replay buffer ``rb`` may unpack to (its arrays, and room)."""
+    total = 0
+    for name in BUFFER_ARRAYS:
+        value = getattr(rb, name, None)
+        for array in value.values() if isinstance(value, dict) else [value] if value is not None else []:
+            total += int(array.nbytes)
+    return 2 * total + (1 << 20)
+
+
+def read_buffer(blob: bytes, what: str, limit: int) -> dict[str, Any]:
+    """The stored replay buffer state (:data:`BUFFER_FORMAT`), unpacked to at most ``limit`` bytes.
+
+    A buffer pickled by earlier versions is refused (:class:`UnsafePayloadError`): reading it would
+    mean unpickling it.
+    """
+    inflate = zlib.decompressobj()
+    try:
+        raw = inflate.decompress(blob, limit)
+    except zlib.error as exc:
+        raise UnsafePayloadError(f"{what} is not a compressed replay buffer ({exc})") from None
+    if inflate.unconsumed_tail:
+        raise UnsafePayloadError(f"{what} unpacks to more than {limit:,} bytes, more than its run's buffer")
+    if raw[:1] == b"\x80" or not raw.startswith(b"PK"):
+        raise UnsafePayloadError(
+            f"{what} is a pickled replay buffer (the format of earlier versions), which is not read: "
+            "unpickling can run code. Resume with --no-replay-buffer to continue without it"
+        )
+    state = load_tensors(raw, what)
+    if not (
+        isinstance(state, dict)
+        and state.get("format") == BUFFER_FORMAT
+        and isinstance(state.get("arrays"), dict)
+    ):
+        raise UnsafePayloadError(f"{what} is not a replay buffer stored by twisted")
+    return state
+
+
+def apply_buffer(model: Any, state: dict[str, Any], what: str) -> None:
+    """Copy :func:`read_buffer`'s arrays into ``model``'s replay buffer; they must match it exactly."""
+    import torch
+
+    rb = model.replay_buffer
+
+    def put(target: Any, value: Any, name: str) -> None:
+        if not isinstance(value, torch.Tensor):
+            raise ValueError(f"{name} is not an array")
+        array = value.numpy()
+        if array.shape != target.shape or array.dtype != target.dtype:
+            raise ValueError(
+                f"{name} is {array.dtype}{list(array.shape)}, the run's is {target.dtype}{list(target.shape)}"
+            )
+        target[...] = array
+
+    try:
+        arrays = state["arrays"]
+        for name in BUFFER_ARRAYS:
+            target = getattr(rb, name, None)
+            if target is None:
+                continue
+            if isinstance(target, dict):
+                if set(arrays[name]) != set(target):
+                    raise ValueError(f"{name} has keys {sorted(arrays[name])}, the run's {sorted(target)}")
+                for key in target:
+                    put(target[key], arrays[name][key], f"{name}.{key}")
+            else:
+                put(target, arrays[name], name)
+        pos, full = int(state["pos"]), bool(state["full"])
+        if not 0 <= pos < rb.buffer_size:
+            raise ValueError(f"position {pos} outside the buffer of {rb.buffer_size}")
+        rb.pos, rb.full = pos, full
+    except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as exc:
+        raise UnsafePayloadError(f"{what} does not fit the run's replay buffer ({exc})") from None
 
 
 def _new_model(config: SacConfig, vec_env: Any) -> Any:
@@ -173,15 +436,6 @@ def _new_model(config: SacConfig, vec_env: Any) -> Any:
     )
 
 
-def _load_model(row: RlCheckpoint, vec_env: Any) -> Any:
-    from stable_baselines3 import SAC
-
-    model = SAC.load(io.BytesIO(row.policy), env=vec_env, device="cpu")
-    if row.replay_buffer is not None:
-        model.load_replay_buffer(io.BytesIO(zlib.decompress(row.replay_buffer)))
-    return model
-
-
 def train_sac(
     store: Store,
     config: SacConfig | None = None,
@@ -189,13 +443,16 @@ def train_sac(
     resume_run_id: int | None = None,
     progress: Callable[[RlProgress], None] | None = None,
     time_limit_s: float | None = None,
+    read_replay_buffer: bool = True,
 ) -> SacOutcome:
     """Train (or, with ``resume_run_id``, continue) a SAC+HER policy; see the module docstring.
 
     On KeyboardInterrupt a checkpoint is stored, the run marked ``interrupted`` and the interrupt
     re-raised. After ``time_limit_s`` seconds (of this call) training stops at the next step with a
     checkpoint and status ``interrupted`` (resumable). Raises ValueError for bad settings or an
-    unknown / finished run to resume.
+    unknown / finished run to resume, :class:`UnsafePayloadError` (a ValueError) for a stored policy
+    or replay buffer that is not plain data or does not fit the run (before anything is written).
+    ``read_replay_buffer=False`` resumes without the stored replay buffer.
     """
     require_rl()
     from stable_baselines3.common.callbacks import BaseCallback
@@ -207,23 +464,45 @@ def train_sac(
         # settings and goals are checked before a run row exists, so bad input leaves no trace
         config = config or SacConfig()
         config.validate()
-        env = make_env(config, _url(store))
-    with store.session(write=True) as session:
-        if resume_run_id is not None:
-            run = session.get(RlRun, resume_run_id)
-            if run is None:
+    else:
+        with store.session() as session:
+            found = session.get(RlRun, resume_run_id)
+            if found is None:
                 raise ValueError(
                     f"there is no SAC run {resume_run_id} in the database (see `twisted rl list`)"
                 )
-            if run.status == "finished":
+            if found.status == "finished":
                 raise ValueError(f"SAC run {resume_run_id} has finished: start a new run instead")
-            config = SacConfig.from_dict(run.parameters)
+            config = SacConfig.from_dict(found.parameters)
             resume_row = session.scalars(
                 select(RlCheckpoint)
-                .where(RlCheckpoint.rl_run_id == run.id)
+                .where(RlCheckpoint.rl_run_id == found.id)
                 .order_by(RlCheckpoint.id.desc())
                 .limit(1)
             ).first()
+    env = make_env(config, _url(store))
+    vec_env = DummyVecEnv([lambda: Monitor(env)])
+    model = _new_model(config, vec_env)
+    without_buffer = False
+    if resume_row is not None:
+        # the stored state is read (tensors and plain data only) and checked before anything is written
+        what = f"SAC checkpoint {resume_row.id} of run {resume_run_id}"
+        try:
+            apply_policy(model, read_policy(resume_row.policy, what), what)
+            if resume_row.replay_buffer is not None and read_replay_buffer:
+                limit = _buffer_limit(model.replay_buffer)
+                apply_buffer(
+                    model, read_buffer(resume_row.replay_buffer, f"the replay buffer of {what}", limit), what
+                )
+            else:
+                without_buffer = True
+        except BaseException:
+            vec_env.close()
+            raise
+    with store.session(write=True) as session:
+        if resume_run_id is not None:
+            run = session.get(RlRun, resume_run_id)
+            assert run is not None
             if resume_row is not None:
                 # the counters go back to the checkpoint: steps after it are lost with the process
                 run.steps_done, run.episodes, run.elapsed_s = (
@@ -256,16 +535,11 @@ def train_sac(
         steps_at_start, episodes_at_start, elapsed_at_start = run.steps_done, run.episodes, run.elapsed_s
         metrics = dict(run.metrics or {})
 
-    if resume_run_id is not None:
-        env = make_env(config, _url(store))
-    vec_env = DummyVecEnv([lambda: Monitor(env)])
     if resume_row is not None:
-        model = _load_model(resume_row, vec_env)
         model.set_random_seed(config.seed + steps_at_start)
-        if resume_row.replay_buffer is None:
+        if without_buffer:
             metrics["resumed_without_replay_buffer"] = True
     else:
-        model = _new_model(config, vec_env)
         steps_at_start = 0
 
     assert config is not None  # set above, from the argument or the resumed run

@@ -8,7 +8,6 @@ the desired goal the plan's next state, as during training.
 
 from __future__ import annotations
 
-import io
 from typing import Any
 
 import numpy as np
@@ -17,7 +16,7 @@ from twisted.model.registry import ModelError
 from twisted.sim import Curve
 from twisted.store.db import Store
 from twisted.store.models import by_id_or_newest
-from twisted.store.rl import RlCheckpoint
+from twisted.store.rl import RlCheckpoint, RlRun
 from twisted.topology import PData
 
 __all__ = ["PolicyError", "SacCurves", "load_policy", "load_policy_sampler"]
@@ -80,8 +79,9 @@ class SacCurves:
 def load_policy(store: Store, model_id: int | None = None) -> tuple[Any, int]:
     """The SB3 SAC model of checkpoint ``model_id`` (None: the newest stored) and its id."""
     try:
-        from stable_baselines3 import SAC
-        from stable_baselines3.common.buffers import DictReplayBuffer
+        from twisted.rl.sac import inference_model, require_rl
+
+        require_rl()
     except ImportError as exc:
         raise PolicyError(
             f"the sac planner needs the rl extra ({exc.name} is missing): pip install 'twisted-knots[rl]'"
@@ -93,19 +93,13 @@ def load_policy(store: Store, model_id: int | None = None) -> tuple[Any, int]:
         if row is None:
             raise PolicyError("the database holds no SAC policy: train one with `twisted rl train`")
         blob, checkpoint_id = row.policy, row.id
+        run = session.get(RlRun, row.rl_run_id)
+        parameters = dict(run.parameters or {}) if run is not None else {}
     try:
-        # Inference needs no environment: a one-slot plain buffer replaces the HER buffer (which needs one).
-        model = SAC.load(
-            io.BytesIO(blob),
-            device="cpu",
-            custom_objects={
-                "replay_buffer_class": DictReplayBuffer,
-                "replay_buffer_kwargs": {},
-                "buffer_size": 1,
-            },
-        )
-    except (ValueError, RuntimeError, KeyError, EOFError) as exc:
-        raise PolicyError(f"SAC policy {checkpoint_id} cannot be loaded: {exc}") from exc
+        # tensors and plain data only, into a model built from the run's settings (docs/security.md)
+        model = inference_model(blob, parameters, f"SAC policy {checkpoint_id}")
+    except ValueError as exc:
+        raise PolicyError(str(exc)) from None
     return model, checkpoint_id
 
 

@@ -51,7 +51,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
-from twisted.goals import Goal, state_goal
+from twisted.goals import Goal, PlanInputError, state_goal
 from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
@@ -59,6 +59,7 @@ from twisted.topology import PData, parse_p_data
 __all__ = [
     "LEASE_STALE_S",
     "OUTCOMES",
+    "DamagedRunError",
     "RunBusyError",
     "SearchCheckpoint",
     "SearchNode",
@@ -325,8 +326,13 @@ class SearchRun:
 
         with self.store.session(write=True) as session:
             record_tightening(
-                session, result, node.p_data, run_id=self.run_id, node_seq=node.index,
-                goal_knot=goal.knot_label, ties_goal=ties_goal,
+                session,
+                result,
+                node.p_data,
+                run_id=self.run_id,
+                node_seq=node.index,
+                goal_knot=goal.knot_label,
+                ties_goal=ties_goal,
             )
 
     def _state_id(self, session: Session, p_data: PData) -> int:
@@ -436,6 +442,11 @@ class SearchRun:
 # --- reading runs ------------------------------------------------------------------------------------------
 
 
+class DamagedRunError(PlanInputError, LookupError):
+    """A stored planner run whose checkpoint or nodes do not read back (not JSON, arrays of odd size);
+    the commands refuse it as bad input (exit 2)."""
+
+
 def _checkpoint(row: SearchCheckpoint | None) -> StoredCheckpoint | None:
     if row is None:
         return None
@@ -444,9 +455,15 @@ def _checkpoint(row: SearchCheckpoint | None) -> StoredCheckpoint | None:
         elapsed_s=row.elapsed_s,
         sim_calls=row.sim_calls,
         nodes=row.nodes,
-        rng_state=json.loads(row.rng_state),
+        rng_state=_rng_state(json.loads(row.rng_state)),
         stats=dict(row.stats or {}),
     )
+
+
+def _rng_state(state: Any) -> dict[str, Any]:
+    if not isinstance(state, dict):
+        raise ValueError(f"its checkpoint's generator state is {type(state).__name__}, not an object")
+    return state
 
 
 def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[StoredNode]:
@@ -493,8 +510,14 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             select(TopologicalState.key).where(TopologicalState.id == row.goal_state_id)
         )
         checkpoint_row = session.get(SearchCheckpoint, run_id)
-        checkpoint = _checkpoint(checkpoint_row)
-        nodes = _nodes(session, run_id) if with_nodes else []
+        try:  # JSON and float64 arrays: data only, never code (docs/security.md); damage is refused
+            checkpoint = _checkpoint(checkpoint_row)
+            nodes = _nodes(session, run_id) if with_nodes else []
+        except (ValueError, TypeError, UnicodeDecodeError) as exc:
+            raise DamagedRunError(
+                f"planner run {run_id} is damaged in the database ({type(exc).__name__}: "
+                f"{str(exc)[:200]}): it cannot be resumed or replayed"
+            ) from None
         parameters = dict(run.parameters or {})
         if row.goal_knot is not None:
             members = [parse_p_data(p) for p in parameters.get("goal_states", [])]
@@ -588,8 +611,10 @@ def solution_path(store: Any, run_id: int) -> list[StoredNode]:
         if row is None or row.goal_node_id is None:
             return []
         # walk parent links in SQL (the README shows the same query as a recursive CTE)
-        path = select(SearchNode.id, SearchNode.parent_id).where(SearchNode.id == row.goal_node_id).cte(
-            "path", recursive=True
+        path = (
+            select(SearchNode.id, SearchNode.parent_id)
+            .where(SearchNode.id == row.goal_node_id)
+            .cte("path", recursive=True)
         )
         path = path.union_all(
             select(SearchNode.id, SearchNode.parent_id).join(path, SearchNode.id == path.c.parent_id)
