@@ -35,7 +35,7 @@ from markupsafe import Markup, escape
 from twisted.browse.queries import PLUGIN
 from twisted.browse.svg import gauss_svg, knot_words, p_data_of_cell, rope_svg
 
-_KNOT_COLUMNS = {"knot_type", "closure_under", "closure_over", "goal_knot"}
+_KNOT_COLUMNS = {"knot_type", "closure_under", "closure_over", "goal_knot", "knot_before", "knot_after"}
 _KEY_COLUMNS = {"key", "state", "goal_key", "start_key", "recorded_key", "result_key"}
 _PICTURES_KEPT = 256
 
@@ -150,6 +150,8 @@ def render_cell(row: Any, value: Any, column: str, table: str | None, database: 
         if words is not None:
             return Markup(f"<strong>{escape(value)}</strong> <small>{escape(words)}</small>")
         return None
+    if isinstance(value, float) and column.endswith(("_seconds", "_s")):
+        return f"{value:,.2f}"
     if table == "runs" and column == "parameters" and isinstance(value, str):
         return _parameters_cell(value)
     if table == "runs" and column == "kind" and isinstance(value, str):

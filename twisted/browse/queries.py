@@ -27,6 +27,9 @@ WITH RECURSIVE tree(node_id, depth) AS (
     SELECT n.id, 0 FROM search_nodes n WHERE n.run_id = :run_id AND n.parent_id IS NULL
   UNION ALL
     SELECT n.id, t.depth + 1 FROM search_nodes n JOIN tree t ON n.parent_id = t.node_id
+), page AS (  -- the page's nodes first (a node's id grows with its seq), then their columns
+    SELECT node_id, depth FROM tree ORDER BY depth, node_id
+    {_PAGE}
 ), plan(node_id) AS (
     SELECT r.goal_node_id FROM search_runs r WHERE r.run_id = :run_id AND r.goal_node_id IS NOT NULL
   UNION ALL
@@ -37,12 +40,11 @@ SELECT t.depth, n.seq, parent.seq AS parent_seq,
        n.points, n.cross AS crossings, s.knot_type,
        n.link, ROUND(n.z_max_m, 3) AS z_max_m, ROUND(n.x_m, 3) AS x_m, ROUND(n.y_m, 3) AS y_m,
        n.iteration, n.sim_call, ROUND(n.created_s, 2) AS created_s, n.id AS node_id, s.key AS state
-FROM tree t
+FROM page t
 JOIN search_nodes n ON n.id = t.node_id
 JOIN topological_states s ON s.id = n.state_id
 LEFT JOIN search_nodes parent ON parent.id = n.parent_id
 ORDER BY t.depth, n.seq
-{_PAGE}
 """
 
 KNOTS_TIED = """
@@ -190,9 +192,14 @@ QUERIES: dict[str, dict[str, Any]] = {
 }
 
 _TABLES: dict[str, dict[str, Any]] = {
-    "runs": {"description": "Long jobs. A plan run links to its tree and its plan pictures (kind column)."},
+    # label_column: a foreign key to the table shows this column beside the id (state 41 3_1-, run 2 plan)
+    "runs": {
+        "description": "Long jobs. A plan run links to its tree and its plan pictures (kind column).",
+        "label_column": "kind",
+    },
     "topological_states": {
-        "description": "Distinct P-data states: the Gauss diagram, a stored rope in that state, its knot."
+        "description": "Distinct P-data states: the Gauss diagram, a stored rope in that state, its knot.",
+        "label_column": "knot_type",
     },
     "configurations": {"description": "Collected ropes (D_Q); points drawn from above."},
     "search_nodes": {"description": "Planner tree nodes; points drawn from above.", "sort_desc": "id"},

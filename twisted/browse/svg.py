@@ -42,7 +42,7 @@ KNOT_WORDS = {
     "3_1+#3_1+": "granny knot (two right-handed trefoils)",
     "3_1-#3_1-": "granny knot (two left-handed trefoils)",
     "3_1+#3_1-": "square (reef) knot",
-    "knotoid": "knotoid: the closures under and over the table differ, no knot",
+    "knotoid": "the two closures differ: no knot",
     "unknown": "a knot outside the catalogue",
 }
 assert set(CATALOGUE) <= set(KNOT_WORDS), "every catalogue knot needs its words"
@@ -97,7 +97,7 @@ def _ends(head: tuple[float, float], tail: tuple[float, float]) -> list[str]:
 
 
 @lru_cache(maxsize=8192)
-def rope_svg(blob: bytes, width: int = 150, height: int = 120, labels: bool = True) -> str | None:
+def rope_svg(blob: bytes, width: int = 170, height: int = 136, labels: bool = True) -> str | None:
     """A rope from above as an SVG knot diagram (the points of a ``points`` BLOB), None when the BLOB
     is not link points.
 
