@@ -35,11 +35,15 @@ def _lint(root: Path) -> subprocess.CompletedProcess[str]:
     )
 
 
-def _layer_modules() -> set[str]:
+def _contract(contract_id: str) -> dict:
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
-    (contract,) = [c for c in config["contracts"] if c["type"] == "layers"]
+    (contract,) = [c for c in config["contracts"] if c["id"] == contract_id]
+    return contract
+
+
+def _layer_modules(contract_id: str = "layers") -> set[str]:
     names = set()
-    for layer in contract["layers"]:
+    for layer in _contract(contract_id)["layers"]:
         for part in layer.replace(":", "|").split("|"):
             names.add(part.strip().strip("()"))
     return names
@@ -57,12 +61,32 @@ def test_the_contract_names_every_module_of_twisted() -> None:
     assert not missing, f"add to a layer in pyproject.toml [tool.importlinter]: {sorted(missing)}"
 
 
-def test_an_import_from_a_higher_layer_breaks_the_contract(tmp_path: Path) -> None:
+def test_the_render_contract_names_every_part_of_twisted_render() -> None:
+    """render is split into parts (geometry, draw, gl, stored); a new part must take its place."""
+    (container,) = _contract("render-parts")["containers"]
+    present = {
+        m.name for m in pkgutil.iter_modules([str(ROOT / "twisted" / "render")]) if not m.name.startswith("_")
+    }
+    assert container == "twisted.render" and present == _layer_modules("render-parts")
+
+
+def _lint_with(tmp_path: Path, module: str, wrong_import: str) -> subprocess.CompletedProcess[str]:
+    """The contracts run on a copy of the tree in which ``module`` (a path) imports ``wrong_import``."""
     for package in PACKAGES:
         shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
-    with (tmp_path / "twisted" / "topology.py").open("a") as f:
-        f.write("\n\ndef _wrong() -> None:\n    import twisted.planner  # noqa: F401\n")
-    result = _lint(tmp_path)
+    with (tmp_path / module).open("a") as f:
+        f.write(f"\n\ndef _wrong() -> None:\n    import {wrong_import}  # noqa: F401\n")
+    return _lint(tmp_path)
+
+
+def test_an_import_from_a_higher_layer_breaks_the_contract(tmp_path: Path) -> None:
+    result = _lint_with(tmp_path, "twisted/topology.py", "twisted.planner")
     assert result.returncode != 0
     assert "twisted.topology is not allowed to import twisted.planner" in result.stdout, result.stdout
+
+
+def test_a_drawing_that_reads_the_store_breaks_the_render_contracts(tmp_path: Path) -> None:
+    result = _lint_with(tmp_path, "twisted/render/draw.py", "twisted.store.models")
+    assert result.returncode != 0
+    assert "twisted.render.draw is not allowed to import twisted.store" in result.stdout, result.stdout
