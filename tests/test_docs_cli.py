@@ -1,0 +1,101 @@
+"""The commands the README and the docs show exist, with the options they show.
+
+Every `twisted ...` line of a fenced code block (its indented continuation lines included) is matched
+against the CLI itself: the command words must name a command, and every `--option` written after them
+must be one of that command's options (or a global one). An option renamed or removed in the code
+fails here, not on a reader's machine.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import click
+import pytest
+import typer
+
+from cli.main import app
+
+REPO = Path(__file__).resolve().parents[1]
+PAGES = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+
+
+def command_lines(text: str) -> list[str]:
+    """The `twisted ...` command lines of the fenced code blocks of a markdown text, each joined with its
+    indented or backslash-continued lines, comments dropped."""
+    lines: list[str] = []
+    for block in re.findall(r"^```[a-z]*\n(.*?)^```", text, flags=re.S | re.M):
+        current: str | None = None
+        for raw in block.splitlines():
+            line = raw.split(" #", 1)[0].rstrip()
+            indented = raw[:1].isspace() and line.strip()[:1] in ("[", "-")  # a usage block's next line
+            continued = current is not None and (indented or current.endswith("\\"))
+            if continued and line.strip():
+                current = current.rstrip("\\").rstrip() + " " + line.strip()  # type: ignore[union-attr]
+                continue
+            if current is not None:
+                lines.append(current)
+                current = None
+            for part in re.split(r"&&|;", line):
+                if part.strip().startswith("twisted "):
+                    if current is not None:
+                        lines.append(current)
+                    current = part.strip()
+        if current is not None:
+            lines.append(current)
+    return lines
+
+
+def _options(command: click.Command) -> set[str]:
+    return {opt for param in command.params for opt in (*param.opts, *param.secondary_opts)}
+
+
+def _resolve(words: list[str]) -> tuple[click.Command, list[str], list[str]]:
+    """The command the words name, the words that named it, the words after it."""
+    root = typer.main.get_command(app)
+    command: click.Command = root
+    named: list[str] = []
+    rest = list(words)
+    while hasattr(command, "get_command") and rest:  # a group (the root is a Typer group of its own)
+        word = rest[0]
+        if word.startswith("-"):  # a global option before the command, with its value
+            rest = rest[2:] if word in ("--db", "--log-file") else rest[1:]
+            continue
+        sub = command.get_command(click.Context(command), word)  # type: ignore[attr-defined]
+        if sub is None:
+            break
+        command, named, rest = sub, [*named, word], rest[1:]
+    return command, named, rest
+
+
+def test_command_lines_are_found_with_their_continuations() -> None:
+    text = (
+        "```\ntwisted plan --goal G [--k 3]\n             [--tighten]   # a comment --nope\n```\n"
+        "```bash\npip install x && twisted plan --knot overhand \\\n    --timeout 3\ntwisted stats\n```\n"
+    )
+    assert command_lines(text) == [
+        "twisted plan --goal G [--k 3] [--tighten]",
+        "twisted plan --knot overhand --timeout 3",
+        "twisted stats",
+    ]
+
+
+GLOBAL = {"--db", "--log-file", "--verbose", "--version", "--help"}
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO)) for p in PAGES])
+def test_the_commands_a_page_shows_exist_with_their_options(page: Path) -> None:
+    problems = []
+    for line in command_lines(page.read_text()):
+        words = re.findall(r"[^\s\[\]|]+", line)[1:]
+        command, named, rest = _resolve(words)
+        if not named:
+            problems.append(f"{line!r}: no such command")
+            continue
+        known = _options(command) | GLOBAL
+        for word in rest:
+            for option in word.split("=", 1)[0].split("/"):  # --flag/--no-flag: both
+                if option.startswith("--") and option not in known:
+                    problems.append(f"{line!r}: `twisted {' '.join(named)}` has no option {option}")
+    assert not problems, "\n".join(problems)
