@@ -21,47 +21,12 @@ import sys
 import tempfile
 import time
 import urllib.request
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 1.0
-
-
-@dataclass
-class _Curve:
-    link: int
-    z_max_m: float
-    x_m: float
-    y_m: float
-
-
-@dataclass
-class _Node:
-    """What SearchRun.save reads from a planner node (twisted.store.search.NodeLike)."""
-
-    index: int
-    parent: int | None
-    q: np.ndarray
-    points: np.ndarray
-    p_data: Any
-    curve: _Curve | None
-    iteration: int
-    sim_call: int
-    created_s: float
-    db_id: int | None = None
-
-
-@dataclass
-class _Checkpoint:
-    iteration: int
-    elapsed_s: float
-    sim_calls: int
-    rng_state: dict[str, Any]
-    stats: dict[str, Any]
 
 
 def _rope(rng: np.random.Generator) -> np.ndarray:
@@ -77,27 +42,29 @@ def _rope(rng: np.random.Generator) -> np.ndarray:
 def build_store(path: Path, nodes: int, seed: int) -> int:
     """A store with one planner run of ``nodes`` nodes; returns the run id."""
     from twisted.goals import state_goal
+    from twisted.planner import Checkpoint, Node
+    from twisted.sim import Curve
     from twisted.store import open_store
     from twisted.store.search import SearchRun
     from twisted.topology import parse_p_data, top
 
     rng = np.random.default_rng(seed)
 
-    def node(index: int, parent: int | None) -> _Node:
+    def node(index: int, parent: int | None) -> Node:
         straight = np.stack([np.arange(22) * 0.04, np.zeros(22), np.zeros(22)], axis=1)
         points = _rope(rng) if parent is not None else straight
-        curve = None if parent is None else _Curve(int(rng.integers(0, 21)), 0.05, 0.2, -0.1)
+        curve = None if parent is None else Curve(int(rng.integers(0, 21)), 0.05, 0.2, -0.1)
         iteration = index // 3
-        return _Node(index, parent, np.zeros(8), points, top(points), curve, iteration, index, 0.01 * index)
+        return Node(index, parent, np.zeros(8), points, top(points), curve, iteration, index, 0.01 * index)
 
-    def checkpoint(iteration: int) -> _Checkpoint:
-        return _Checkpoint(iteration, 0.01 * iteration, 3 * iteration, {"seed": seed}, {})
+    def checkpoint(iteration: int) -> Checkpoint:
+        return Checkpoint(iteration, 0.01 * iteration, 3 * iteration, {"seed": seed}, {})
 
     goal = state_goal(parse_p_data([[1, "O", 2, "+"], [2, "U", 1, "+"]]))
     with open_store(f"sqlite:///{path}") as store:
         parameters = {"planner": "bench", "seed": seed}
         recorder = SearchRun.create(store, goal, parameters, node(0, None), checkpoint(0))
-        batch: list[_Node] = []
+        batch: list[Node] = []
         for index in range(1, nodes):
             batch.append(node(index, int(rng.integers(0, index))))
             if len(batch) == 1000 or index == nodes - 1:
