@@ -2,9 +2,9 @@
 Gauss diagram, and the words for a knot type.
 
 They show what :func:`twisted.render.draw_knot_diagram` and :func:`twisted.render.draw_gauss_diagram`
-show (the same crossings, gaps, visit labels, zoom and colours; the geometry comes from
-:mod:`twisted.render`), written as SVG text directly: a matplotlib SVG costs 0.1-0.2 s and 15-20 kB per
-picture, one of these well under a millisecond and 1-3 kB, so a page of 100 rows stays fast. The full
+show (the same crossings, gaps, visit labels, zoom and colours, from :mod:`twisted.render.geometry`),
+written as SVG text directly: a matplotlib SVG costs 0.1-0.2 s and 15-20 kB per picture, one of these
+about a millisecond and 1-2 kB, so a page of 100 rows stays fast. The full
 matplotlib drawing of a state (``render --goal``) is one link away (:mod:`twisted.browse.plugin`).
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.knots.catalogue import CATALOGUE
-from twisted.render import (
+from twisted.render.geometry import (
     ROPE_COLOUR,
     SIGN_COLOUR,
     crossing_geometry,
