@@ -38,7 +38,7 @@ from twisted.model.encoding import (
 from twisted.model.network import InverseModel
 from twisted.model.registry import list_models, load_model
 from twisted.model.train import train
-from twisted.moves import Move, enumerate_states, explains, successors
+from twisted.moves import Move, enumerate_states, explains, neighbours, successors
 from twisted.proposals import across_curve
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve, RopeSim
 from twisted.store import Configuration, open_store
@@ -118,12 +118,25 @@ def test_mirrored_and_reversed_moves_make_the_transformed_state_from_the_transfo
 def test_mirror_and_reverse_of_a_move_agree_with_the_physics() -> None:
     """A transition explained by a move; its mirrored (reversed) start and curve, simulated, reach the
     state that the mirrored (reversed) move makes from the transformed start (physics is symmetric up to
-    chaos, so most of the time)."""
+    chaos, so most of the time). A rate over several seeds, not one seed's handful of transitions: with
+    seed 5 alone the test passed at 5 of 8 while, once `explains` also named removing moves, half of all
+    transformed moves were looked for among the adding moves only (15 seeds: 61 of 120)."""
     sim = RopeSim()
-    rng = np.random.default_rng(5)
+    agree = {"mirror": 0, "reverse": 0}
+    checked = 0
+    for seed in (5, 6, 7, 8):
+        checked += _moves_against_physics(sim, np.random.default_rng(seed), agree)
+    assert checked >= 24, checked
+    assert agree["mirror"] >= 0.6 * checked, agree
+    assert agree["reverse"] >= 0.6 * checked, agree
+
+
+def _moves_against_physics(sim: RopeSim, rng: np.random.Generator, agree: dict[str, int]) -> int:
+    """Up to 8 random transitions explained by a move, adding or removing (from the straight rope and the
+    states reached, up to 3 crossings); count into ``agree`` the transformed twins that reach the state the
+    transformed move makes; return the number of transitions checked."""
     sim.reset()
     starts = [sim.state()]
-    agree = {"mirror": 0, "reverse": 0}
     checked = 0
     tries = 0
     while checked < 8 and tries < 120:
@@ -148,11 +161,9 @@ def test_mirror_and_reverse_of_a_move_agree_with_the_physics() -> None:
             sim.set_state(f_state(sim, state))
             if not sim.apply(Curve.from_array(f_curve(curve.to_array()))).ok:
                 continue
-            made = [s.state for s in successors(f_p(p)) if s.move == f_move(move, p)]
+            made = [s.state for s in neighbours(f_p(p)) if s.move == f_move(move, p)]
             agree[name] += made == [sim.p_data()]
-    assert checked >= 6, checked
-    assert agree["mirror"] >= 0.6 * checked, agree
-    assert agree["reverse"] >= 0.6 * checked, agree
+    return checked
 
 
 # ---- planner trees as training data ----------------------------------------------------------------
