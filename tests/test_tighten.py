@@ -25,7 +25,11 @@ from twisted.tighten import Tightened, tighten, tightening_sim
 from twisted.topology import EMPTY, parse_p_data, top
 
 runner = CliRunner()
-SEED = "0"  # with the shipped model, seed 0's first overhand holds when pulled (seeds 3, 4, 6 do not)
+SEED = "0"
+# Whether the first overhand a search reaches holds when pulled depends on the seed (about half did, with
+# the shipped model: 6 of 14 seeds, docs/log/2026-12-01.md); the stored-plan fixture takes the first of
+# these seeds whose plan holds instead of one seed picked by hand (none of 12 holding: ~0.1 %).
+HOLD_SEEDS = range(12)
 # two crossings, the end tucked in a loop: under the table a trefoil, over it the unknot
 KNOTOID_2 = '[[1,"U",3,"+"],[2,"O",4,"+"],[3,"O",1,"+"],[4,"U",2,"+"]]'
 
@@ -39,8 +43,11 @@ def _json(out: str) -> dict:
     return json.loads(out[out.index("{") : out.rindex("}") + 1])
 
 
-def _plan(db: str, *args: str) -> dict:
-    code, out = _cli(db, "plan", *args, "--workers", "1", "--seed", SEED, "--timeout", "120", "--json")
+def _plan(db: str, *args: str, seed: str = SEED) -> dict:
+    """A solved plan. Bounded by iterations, which a seed replays on any machine, not by a wall-clock
+    timeout (a busy CI machine made 157 simulator calls in 120 s where an idle one makes over 1,000)."""
+    limits = ["--max-iterations", "1000", "--timeout", "3600"]
+    code, out = _cli(db, "plan", *args, "--workers", "1", "--seed", seed, *limits, "--json")
     assert code == 0, out
     result = _json(out)
     assert result["solved"], result
@@ -49,9 +56,27 @@ def _plan(db: str, *args: str) -> dict:
 
 @pytest.fixture(scope="module")
 def overhand_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, dict]:
-    """A stored plan (no pull test during the search) from the straight rope to an overhand knot."""
-    db = f"sqlite:///{tmp_path_factory.mktemp('tighten') / 'overhand.db'}"
-    return db, _plan(db, "--knot", "overhand")
+    """A stored plan (no pull test during the search) from the straight rope to an overhand knot whose
+    final rope holds when pulled: the first of HOLD_SEEDS that makes one (a database per seed)."""
+    folder = tmp_path_factory.mktemp("tighten")
+    for seed in HOLD_SEEDS:
+        db = f"sqlite:///{folder / f'overhand-{seed}.db'}"
+        result = _plan(db, "--knot", "overhand", seed=str(seed))
+        code, out = _cli(db, "replay", str(result["run_id"]), "--tighten", "--json")
+        if code == 0:
+            return _tightened_away(db, result["run_id"]), result
+    pytest.fail(f"no overhand of seeds {HOLD_SEEDS} held when pulled; about half should")
+
+
+def _tightened_away(db: str, run_id: int) -> str:
+    """``db`` with the pull test the fixture ran on ``run_id`` deleted, so the tests see the plan alone."""
+    from sqlalchemy import delete
+
+    from twisted.store.knots import Tightening
+
+    with open_store(db) as store, store.session(write=True) as session:
+        session.execute(delete(Tightening).where(Tightening.run_id == run_id))
+    return db
 
 
 # --- the pull test itself ------------------------------------------------------------------------------
