@@ -40,7 +40,11 @@ CASES: dict[str, tuple[str, dict[str, Any], int]] = {
     "knot-tighten": ("knot:overhand", {"seed": 0, "tighten": True}, 100),
     "random-low": (THREE, {"planner": "random-low", "seed": 4, "p_expand": 0.3, "k_expand": 6}, 20),
     "low-level-only": (THREE, {"planner": "low-level-only", "seed": 5}, 30),
-    "paper": (THREE, {"seed": 1, "retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "p_expand": 0.05}, 20),
+    "paper": (
+        THREE,
+        {"seed": 1, "retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "p_expand": 0.05},
+        20,
+    ),
     "state-prior": (TWO, {"seed": 3, "state_prior": 20.0}, 25),
     "ucb-room-off": (THREE, {"heuristic": "ucb", "seed": 6, "r1_room": 0.0, "retry_weight": 0.5}, 20),
 }
@@ -52,7 +56,9 @@ def digest(search: Any, result: Any) -> str:
             n.index,
             n.parent,
             n.p_data.key,
-            None if n.curve is None else [n.curve.link, repr(n.curve.z_max_m), repr(n.curve.x_m), repr(n.curve.y_m)],
+            None
+            if n.curve is None
+            else [n.curve.link, repr(n.curve.z_max_m), repr(n.curve.x_m), repr(n.curve.y_m)],
             n.iteration,
             n.sim_call,
         ]
@@ -60,7 +66,10 @@ def digest(search: Any, result: Any) -> str:
     ]
     payload = {
         "nodes": nodes,
-        "stats": {t: {k: [repr(x) for x in v] for k, v in sorted(e.items())} for t, e in sorted(result.stats.items())},
+        "stats": {
+            t: {k: [repr(x) for x in v] for k, v in sorted(e.items())}
+            for t, e in sorted(result.stats.items())
+        },
         "rng": repr(search.rng.bit_generator.state),
         "status": result.status,
         "sim_calls": result.sim_calls,
@@ -81,7 +90,11 @@ def run_case(name: str) -> dict[str, Any]:
         goal = make_goal(knot=goal_text.split(":", 1)[1])
     else:
         goal = make_goal(goal_text)
-    with tempfile.TemporaryDirectory() as tmp, open_store(f"sqlite:///{tmp}/d.db") as store, SimPool(1) as pool:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        open_store(f"sqlite:///{tmp}/d.db") as store,
+        SimPool(1) as pool,
+    ):
         sampler, _ = curve_sampler(store, options.planner)
         search = start_search(store, goal, options, pool, sampler)
         started = time.perf_counter()
@@ -97,7 +110,9 @@ def run_case(name: str) -> dict[str, Any]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--record", action="store_true", help="write the digests to " + RECORDED.name)
     parser.add_argument("--case", action="append", choices=sorted(CASES), help="run only these cases")
     args = parser.parse_args()
@@ -112,7 +127,9 @@ def main() -> None:
                 recorded.pop(name, None)
             continue
         before = recorded.get(name, {}).get("digest")
-        same = "recorded" if args.record else ("same" if before == out["digest"] else f"DIFFERS (was {before})")
+        same = (
+            "recorded" if args.record else ("same" if before == out["digest"] else f"DIFFERS (was {before})")
+        )
         failed += not args.record and before != out["digest"]
         print(
             f"{name:15s} {out['digest']}  {same:28s} calls {out['sim_calls']:4d}  nodes {out['nodes']:4d}  "

@@ -23,23 +23,14 @@ from cli.app import (
     unwritable,
 )
 from cli.options import (
-    DEFAULT_PLANNER,
     DEFAULT_SEEDS,
-    Heuristic,
-    Planner,
     Seeds,
-    cross_move_option,
     json_option,
-    k_expand_option,
-    k_option,
-    p_expand_option,
     print_json,
-    r1_room_option,
     ray_address_argument,
-    retry_weight_option,
+    result_flags,
     seeds_option,
-    state_prior_option,
-    value,
+    with_planner_options,
 )
 
 if TYPE_CHECKING:
@@ -268,10 +259,17 @@ def _eval_one(ctx: typer.Context, store: Any, prepared: PreparedEval, backend: A
     return summary
 
 
-def _planner_options(heuristic: Heuristic | None, model_id: int | None, **given: Any) -> dict[str, Any]:
-    """The planner options given (None: the planner's default), as the evaluation stores them."""
-    options: dict[str, Any] = {"heuristic": value(heuristic), "model_id": model_id, **given}
-    return {name: v for name, v in options.items() if v is not None}
+def _planner_options(model_id: int | None, given: dict[str, Any]) -> dict[str, Any]:
+    """The planner options given (None: the planner's default) but the planner kind, as the evaluation
+    stores them."""
+    options: dict[str, Any] = {**given, "model_id": model_id}
+    return {name: v for name, v in options.items() if v is not None and name != "planner"}
+
+
+def _default_planner() -> str:
+    from twisted.planner import PlannerOptions
+
+    return PlannerOptions.planner
 
 
 def _default_parallel() -> int:
@@ -281,6 +279,7 @@ def _default_parallel() -> int:
 
 
 @app.command("eval")
+@with_planner_options("eval")
 def eval_command(
     ctx: typer.Context,
     set_names: Annotated[
@@ -289,10 +288,6 @@ def eval_command(
             "--set", help="Problem set (see `twisted problems list`); repeatable: the sets run in turn."
         ),
     ],
-    planner: Annotated[
-        Planner,
-        typer.Option("--planner", help="twisted, sac (SAC+HER policy), random-low or low-level-only."),
-    ] = DEFAULT_PLANNER,
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time per goal in seconds (paper: 1800)."
     ),
@@ -304,30 +299,21 @@ def eval_command(
         1.0, "--friction-scale", min=0.01, max=100.0, help="Rope friction factor (0.95/1.05)."
     ),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
-    heuristic: Annotated[
-        Heuristic | None, typer.Option("--heuristic", help="rnd, crs or ucb (planner default: crs).")
-    ] = None,
     model_id: int = typer.Option(
         None, "--model", help="Inverse model id (twisted) or policy checkpoint id (sac); default: the newest."
     ),
-    k: int | None = k_option(),
-    p_expand: float | None = p_expand_option(),
-    k_expand: int | None = k_expand_option(),
-    retry_weight: float | None = retry_weight_option(),
-    state_prior: float | None = state_prior_option(),
-    cross_move: float | None = cross_move_option(),
-    r1_room: float | None = r1_room_option(),
     label: str = typer.Option(
         None,
         "--label",
         help="Name the results are stored under (default: planner[-heuristic]); results under one label "
-        "must share the planner, model, heuristic, --k, --p-expand, --k-expand, --retry-weight, "
-        "--state-prior, --cross-move and --r1-room.",
+        f"must share the model and {result_flags()}.",
     ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the goals as tasks on a Ray cluster (--parallel 0: its CPUs); see ADDRESS."
     ),
     ray_address: str | None = ray_address_argument(),
+    *,
+    search_options: dict[str, Any],
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
     from twisted.distributed import DistributedError, import_ray, resolve_address
@@ -343,21 +329,10 @@ def eval_command(
     if not use_ray:
         check_workers(parallel or None, "--parallel")
     parallel = parallel or (0 if use_ray else _default_parallel())
-    options = _planner_options(
-        heuristic,
-        model_id,
-        k=k,
-        p_expand=p_expand,
-        k_expand=k_expand,
-        retry_weight=retry_weight,
-        state_prior=state_prior,
-        cross_move=cross_move,
-        r1_room=r1_room,
-    )
+    planner = search_options["planner"] or _default_planner()
+    options = _planner_options(model_id, search_options)
     requests = [
-        EvalOptions(
-            name, value(planner), timeout_s, list(seeds), friction_scale, workers, parallel, options, label
-        )
+        EvalOptions(name, planner, timeout_s, list(seeds), friction_scale, workers, parallel, options, label)
         for name in dict.fromkeys(set_names)
     ]
     _eval(ctx, requests, use_ray, ray_address)
@@ -453,10 +428,10 @@ def compare_command(
 
 
 @sensitivity_app.command("run")
+@with_planner_options("sensitivity")
 def sensitivity_run(
     ctx: typer.Context,
     set_name: str = typer.Option(..., "--set", help="Problem set."),
-    planner: Annotated[Planner, typer.Option("--planner")] = DEFAULT_PLANNER,
     timeout_s: float = typer.Option(1800.0, "--timeout", min=0.0, help="Search time per goal in seconds."),
     scales: Annotated[
         list[float] | None, typer.Option("--scales", help="Friction factors (default 0.95 1.0 1.05); repeat.")
@@ -464,9 +439,10 @@ def sensitivity_run(
     seeds: Annotated[Seeds, seeds_option()] = DEFAULT_SEEDS,
     workers: int = typer.Option(1, "--workers", min=1),
     parallel: int = typer.Option(0, "--parallel", min=0, help="Goals at once (0 = one per CPU core)."),
-    heuristic: Annotated[Heuristic | None, typer.Option("--heuristic")] = None,
     model_id: int = typer.Option(None, "--model"),
     label: str = typer.Option(None, "--label", help="Name the results are stored under."),
+    *,
+    search_options: dict[str, Any],
 ) -> None:
     """Evaluate one planner on a set at several friction scales (finished results are reused)."""
     from twisted.experiments import EvalInputError, EvalOptions
@@ -479,11 +455,10 @@ def sensitivity_run(
     check_workers(workers)
     check_workers(parallel or None, "--parallel")
     parallel = parallel or _default_parallel()
-    options = _planner_options(heuristic, model_id)
+    options = _planner_options(model_id, search_options)
+    planner = search_options["planner"] or _default_planner()
     requests = [
-        EvalOptions(
-            set_name, value(planner), timeout_s, list(seeds), scale, workers, parallel, options, label
-        )
+        EvalOptions(set_name, planner, timeout_s, list(seeds), scale, workers, parallel, options, label)
         for scale in chosen
     ]
     _eval(ctx, requests)

@@ -30,23 +30,9 @@ from cli.app import (
     err_console,
     fail,
     open_db,
-    seed_option,
     unwritable,
 )
-from cli.options import (
-    Heuristic,
-    Planner,
-    cross_move_option,
-    json_option,
-    k_expand_option,
-    k_option,
-    p_expand_option,
-    print_json,
-    r1_room_option,
-    retry_weight_option,
-    state_prior_option,
-    value,
-)
+from cli.options import json_option, print_json, with_planner_options
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
@@ -54,6 +40,7 @@ def _curve_row(curve: Any) -> dict[str, Any]:
 
 
 @app.command("plan")
+@with_planner_options("plan")
 def plan_command(
     ctx: typer.Context,
     goal: str | None = typer.Option(
@@ -76,29 +63,8 @@ def plan_command(
     timeout_s: float = typer.Option(
         1800.0, "--timeout", min=0.0, help="Search time limit in seconds (a resumed run's time counts)."
     ),
-    heuristic: Annotated[
-        Heuristic | None, typer.Option("--heuristic", help="rnd | crs (default) | ucb.")
-    ] = None,
-    planner: Annotated[
-        Planner | None,
-        typer.Option(
-            "--planner",
-            help="twisted (default, inverse model) | sac (SAC+HER policy) | random-low | low-level-only.",
-        ),
-    ] = None,
     workers: int = typer.Option(
         2, "--workers", help="Simulator processes (1: in this process; at most 4 per CPU core)."
-    ),
-    seed: int | None = seed_option(None, "Seed of the search (default 0)."),
-    k: int | None = k_option(),
-    p_expand: float | None = p_expand_option(),
-    k_expand: int | None = k_expand_option(),
-    retry_weight: float | None = retry_weight_option(),
-    state_prior: float | None = state_prior_option(),
-    cross_move: float | None = cross_move_option(),
-    r1_room: float | None = r1_room_option(),
-    plan_limit: int | None = typer.Option(
-        None, "--plan-limit", min=1, max=100_000, help="High-level plans kept per reached state (100)."
     ),
     model_id: int | None = typer.Option(
         None,
@@ -123,13 +89,6 @@ def plan_command(
     checkpoint_every_s: float = typer.Option(
         2.0, "--checkpoint-every", min=0.0, help="Seconds between checkpoints."
     ),
-    tighten: bool = typer.Option(
-        False,
-        "--tighten",
-        help="Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a "
-        "little, pulled apart) ties the goal's knot; a reached state that fails the pull test does not "
-        "end the search. Each pull test is stored with the run.",
-    ),
     picture: Annotated[
         Path | None,
         typer.Option(
@@ -139,6 +98,8 @@ def plan_command(
         ),
     ] = None,
     as_json: bool = json_option("the result"),
+    *,
+    search_options: dict[str, Any],
 ) -> None:
     """Search for curves that tie GOAL (Algorithm 1); the search tree goes to the database.
 
@@ -155,20 +116,7 @@ def plan_command(
         model_id=model_id,
         workers=workers,
         as_json=as_json,
-        search_options={
-            "planner": value(planner),
-            "heuristic": value(heuristic),
-            "seed": seed,
-            "k": k,
-            "p_expand": p_expand,
-            "k_expand": k_expand,
-            "retry_weight": retry_weight,
-            "state_prior": state_prior,
-            "cross_move": cross_move,
-            "r1_room": r1_room,
-            "plan_limit": plan_limit,
-            "tighten": True if tighten else None,
-        },
+        search_options=search_options,  # the planner options (twisted.planner.options), None: not given
     )
     _check(request)
     if picture is not None:

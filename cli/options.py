@@ -8,22 +8,32 @@ the command line is parsed, before any command runs. Lists (``--seeds``, ``--fro
 
 from __future__ import annotations
 
+import functools
+import inspect
 import json
+from collections.abc import Callable
 from enum import Enum
-from typing import Any
+from typing import Any, TypeVar
 
 import typer
 
 from cli.app import MAX_SEED, shorten
 from twisted.model.config import DEVICES, LINK_HEADS, SOURCES, NetConfig, TrainConfig
-from twisted.planner import HEURISTICS, PLANNERS, PlannerOptions
-from twisted.planner.search import N_LINKS
+from twisted.planner.options import OptionSpec, PlannerOptions, result_options, specs
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
 
-# mypy cannot see members made from a tuple; the members are the tuple's strings (Planner("sac"))
-Planner = Enum("Planner", [(name, name) for name in PLANNERS], type=str)  # type: ignore[misc]
-Heuristic = Enum("Heuristic", [(name, name) for name in HEURISTICS], type=str)  # type: ignore[misc]
+# mypy cannot see members made from a tuple; the members are the tuple's strings (Planner("sac")).
+# The planner options' choices come from their declaration (PlannerOptions).
+CHOICES: dict[str, Any] = {
+    spec.name: Enum(spec.name.title(), [(c, c) for c in spec.choices], type=str)  # type: ignore[misc]
+    for spec in specs()
+    if spec.choices
+}
+Planner = CHOICES["planner"]
+Heuristic = CHOICES["heuristic"]
 LinkHead = Enum("LinkHead", [(name, name) for name in LINK_HEADS], type=str)  # type: ignore[misc]
 DEFAULT_PLANNER = Planner(PlannerOptions.planner)
 DEFAULT_LINK_HEAD = LinkHead(NetConfig.link_head)
@@ -126,96 +136,64 @@ def parse_device(text: str) -> str:
     return text
 
 
-def k_option() -> Any:
-    """``--k`` of the commands that run the planner (plan, eval); None: PlannerOptions.k."""
-    return typer.Option(
-        None, "--k", min=1, max=1000, help=f"Curves sampled per plan step (default {PlannerOptions.k})."
-    )
+def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
+    """The Typer parameter of one declared planner option: ``--NAME``, None when not given (a flag:
+    False), its bounds checked (NaN included; click's ranges let NaN through), its choices offered."""
+    shown = f"{spec.default:g}" if isinstance(spec.default, float) else str(spec.default)
+    help = spec.help if spec.type is bool else spec.help.rstrip(".") + f" (default {shown})."
+    if spec.type is bool:
+        flag = typer.Option(False, spec.flag, help=help)
+        return inspect.Parameter(spec.name, inspect.Parameter.KEYWORD_ONLY, default=flag, annotation=bool)
+    annotation: Any = CHOICES[spec.name] if spec.choices else spec.type
 
-
-def p_expand_option() -> Any:
-    """``--p-expand`` of the commands that run the planner; None: PlannerOptions.p_expand."""
-    return typer.Option(
-        None,
-        "--p-expand",
-        min=0.0,
-        max=1.0,
-        help=f"RandomExpand probability after a failed iteration ({PlannerOptions.p_expand}).",
-    )
-
-
-def k_expand_option() -> Any:
-    """``--k-expand`` of the commands that run the planner; None: PlannerOptions.k_expand."""
-    return typer.Option(
-        None, "--k-expand", min=1, max=100_000, help=f"Curves per RandomExpand ({PlannerOptions.k_expand})."
-    )
-
-
-def _bounded_option(
-    flag: str, low: float, high: float, must: str, help: str, *, low_open: bool = False
-) -> Any:
-    """A float option of the commands that run the planner (None: the PlannerOptions default) whose
-    callback refuses a value outside ``[low, high]`` (``(low, high]`` with ``low_open``), NaN
-    included, saying it ``must`` be what the text names (click's ranges let NaN through)."""
-
-    def check(value: float | None) -> float | None:
-        if value is not None and not ((low < value if low_open else low <= value) and value <= high):
-            raise _bad(f"{flag} {value}: must {must}")
+    def check(value: Any) -> Any:
+        problem = None if value is None or spec.choices else spec.check(value)
+        if problem is not None:
+            raise _bad(f"{spec.flag} {value}: {problem}")
         return value
 
-    return typer.Option(None, flag, callback=check, help=help)
-
-
-def retry_weight_option() -> Any:
-    """``--retry-weight`` of the commands that run the planner; None: PlannerOptions.retry_weight."""
-    return _bounded_option(
-        "--retry-weight",
-        0.0,
-        1.0,
-        "lie in (0, 1]",
-        "Node choice: weight retry_weight**n for a node already asked n times for the plan's next "
-        f"state (1: the paper's uniform choice; default {PlannerOptions.retry_weight}).",
-        low_open=True,
+    option = typer.Option(None, spec.flag, callback=check, help=help)
+    return inspect.Parameter(
+        spec.name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=annotation | None
     )
 
 
-def state_prior_option() -> Any:
-    """``--state-prior`` of the commands that run the planner; None: PlannerOptions.state_prior."""
-    return _bounded_option(
-        "--state-prior",
-        0.0,
-        1e6,
-        "be a number of tries in [0, 1e6]",
-        "State choice (crs): weight (1 + Cross(s)) * r(s), r(s) how the plan steps tried from s fare "
-        "against its crossing level, shrunk by this many tries (0: the paper's crs; default "
-        f"{PlannerOptions.state_prior:g}).",
-    )
+def _plain(given: Any) -> Any:
+    """A planner option as the planner takes it: a choice's string; None for a flag not given."""
+    if given is False:
+        return None
+    return given.value if isinstance(given, Enum) else given
 
 
-def cross_move_option() -> Any:
-    """``--cross-move`` of the commands that run the planner; None: PlannerOptions.cross_move."""
-    return _bounded_option(
-        "--cross-move",
-        0.0,
-        1.0,
-        "be a share of the K curves in [0, 1]",
-        "Share of the K curves of a plan step toward a Cross move that are scripted (the tip, or "
-        "the crossed strand, carried across; planner twisted) instead of drawn from the model "
-        f"(0: all from the model; default {PlannerOptions.cross_move:g}).",
-    )
+def with_planner_options(command: str) -> Callable[[F], F]:
+    """Give a Typer command the planner options that ``command`` takes (``PlannerOptions``' declaration,
+    :func:`twisted.planner.options.specs`): each is a ``--NAME`` option, and the command function gets
+    them in one keyword argument ``search_options`` (name -> value; None: not given, the planner's
+    default). Put it below ``@app.command``."""
+    chosen = [spec for spec in specs() if command in spec.commands]
+
+    def decorate(func: F) -> F:
+        signature = inspect.signature(func, eval_str=True)
+        kept = [p for name, p in signature.parameters.items() if name != "search_options"]
+        added = [_planner_parameter(spec) for spec in chosen]
+
+        @functools.wraps(func)
+        def command_function(*args: Any, **kwargs: Any) -> Any:
+            given = {spec.name: kwargs.pop(spec.name) for spec in chosen}
+            search_options = {name: _plain(v) for name, v in given.items()}
+            return func(*args, search_options=search_options, **kwargs)
+
+        parameters = kept + added
+        command_function.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+        command_function.__annotations__ = {p.name: p.annotation for p in parameters}
+        return command_function  # type: ignore[return-value]
+
+    return decorate
 
 
-def r1_room_option() -> Any:
-    """``--r1-room`` of the commands that run the planner; None: PlannerOptions.r1_room."""
-    return _bounded_option(
-        "--r1-room",
-        0.0,
-        N_LINKS,
-        f"be a number of links in [0, {N_LINKS}]",
-        "Room for R1 curls: a node whose segment for the curl is shorter than this many links gets "
-        "weight (length / r1_room)^2, and a plan that starts with a curl, and its state, the weight "
-        f"of the best node for it (0: off; default {PlannerOptions.r1_room:g}).",
-    )
+def result_flags() -> str:
+    """The options results under one evaluation label must share, as flags (``eval --label``'s help)."""
+    return ", ".join("--" + name.replace("_", "-") for name in result_options())
 
 
 def json_option(what: str) -> Any:

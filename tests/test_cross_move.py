@@ -1,5 +1,5 @@
-"""The scripted Cross move curve (twisted.proposals) and the planner's use of it (``--cross-move``);
-the node choice for an R1 step by the room its segment leaves for the curl (``--r1-room``).
+"""The scripted Cross move curve (twisted.proposals), and the planner options that use it and the R1 room
+(``--cross-move``, ``--r1-room``).
 
 The rope configurations are made by the simulator from the straight rope with seeded curves, so each
 test sees the same ropes every time.
@@ -7,21 +7,17 @@ test sees the same ropes every time.
 
 from __future__ import annotations
 
-from collections import Counter
 from functools import cache
-from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 import pytest
 
-from twisted.goals import PlanInputError, check_goal
-from twisted.moves import Move, plans, successors
-from twisted.planner import Node, PlannerOptions, SearchTree, Twisted, planner_options
-from twisted.planner.search import N_LINKS as SEARCH_N_LINKS
-from twisted.planner.search import R1_ROOM_FLOOR
+from twisted.goals import PlanInputError
+from twisted.moves import Move, successors
+from twisted.planner import PlannerOptions, planner_options
+from twisted.planner.options import N_LINKS as PLANNER_N_LINKS
 from twisted.proposals import across_curve, cross_move_curve, segment_bounds
-from twisted.sim import N_LINKS, Curve, RopeSim, sample_curve
+from twisted.sim import N_LINKS, RopeSim, sample_curve
 from twisted.topology import PData, top
 
 
@@ -127,157 +123,21 @@ def test_cross_move_curves_make_their_move_in_the_simulator_more_often_than_rand
     assert hits["scripted"] >= 5 and hits["scripted"] >= 3 * max(1, hits["random"]), hits
 
 
-# ---- the planner --------------------------------------------------------------------------------
+# ---- the planner's options for them ------------------------------------------------------------------
+# (the parts that use them, ScriptedCross, StepCurves and R1Room, are tested in tests/test_strategies.py)
 
 
-class _CountingSampler:
-    """The planner's sampler protocol, counting the curves asked of it."""
-
-    name = "counting"
-
-    def __init__(self) -> None:
-        self.asked = 0
-
-    def sample(
-        self, node: Any, next_state: PData, move: Any, n: int, rng: np.random.Generator
-    ) -> list[Curve]:
-        self.asked += n
-        return [sample_curve(rng) for _ in range(n)]
-
-
-def _search(planner: str, share: float, n: int = 1) -> tuple[Twisted, _CountingSampler]:
-    state, points = _rope(n)
-    p = top(points)
-    tree = SearchTree()
-    tree.add(Node(0, None, state, points, p, None, 0, 0))
-    goal = check_goal(_cross_moves(p)[0][0].to_json())
-    sampler = _CountingSampler()
-    options = PlannerOptions(planner=planner, k=3, cross_move=share, r1_room=0.0, seed=1)
-    search = Twisted(
-        goal, tree, options, pool=None, high_level=lambda s: plans(s, goal, 100), sampler=sampler
-    )  # type: ignore[arg-type]
-    return search, sampler
-
-
-@pytest.mark.parametrize(
-    ("planner", "share", "scripted"),
-    [("twisted", 0.67, 2), ("twisted", 1.0, 3), ("twisted", 0.0, 0), ("sac", 1.0, 0)],
-)
-def test_a_step_toward_a_cross_move_takes_its_share_of_scripted_curves(
-    planner: str, share: float, scripted: int
-) -> None:
-    search, sampler = _search(planner, share)
-    node = search.tree.nodes[0]
-    reached, move = _cross_moves(node.p_data)[0]
-    curves, made = search.step_curves(node, reached, move)
-    assert len(curves) == 3 and made == scripted and sampler.asked == 3 - scripted
-    # a step toward any other move takes every curve from the sampler
-    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1")
-    curves, made = search.step_curves(node, r1.state, r1.move)
-    assert len(curves) == 3 and made == 0 and sampler.asked == 6 - scripted
-
-
-def test_the_cross_move_share_is_checked_and_runs_stored_before_it_had_none() -> None:
-    with pytest.raises(PlanInputError, match=r"cross_move must lie in \[0, 1\], got 1.5"):
+def test_the_cross_move_share_and_r1_room_are_checked_and_old_runs_resume_without_them() -> None:
+    with pytest.raises(
+        PlanInputError, match=r"cross_move must be a share of the K curves in \[0, 1\], got 1.5"
+    ):
         planner_options({"cross_move": 1.5})
-    stored = PlannerOptions(cross_move=0.5).to_dict()
-    assert PlannerOptions.from_dict(stored).cross_move == 0.5
-    del stored["cross_move"]
-    assert PlannerOptions.from_dict(stored).cross_move == 0.0
-
-
-# ---- R1 room: the node choice for a curl ----------------------------------------------------------
-
-
-def test_the_r1_room_weight_is_the_squared_share_of_the_room_asked_for() -> None:
-    search, _ = _search("twisted", 0.0)
-    search = Twisted(
-        search.goal, search.tree, PlannerOptions(r1_room=8.0), pool=None, high_level=search.high_level
-    )  # type: ignore[arg-type]
-    node = search.tree.nodes[0]
-    bounds = segment_bounds(node.points)
-    for segment in range(len(bounds) - 1):
-        length = bounds[segment + 1] - bounds[segment]
-        expected = max(R1_ROOM_FLOOR, min(1.0, length / 8.0) ** 2)
-        assert search.r1_room_weight(node, segment) == pytest.approx(expected)
-
-
-def test_an_r1_step_goes_to_the_nodes_with_room_for_the_curl() -> None:
-    """Two nodes of one state: the plan's R1 segment spans 2 links in one and 8 in the other."""
-    search, _ = _search("twisted", 0.0)
-    node = search.tree.nodes[0]
-    search.tree.add(Node(1, 0, node.q, node.points, node.p_data, None, 0, 0))
-    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
-    bounds = np.array([0.0, 5.0, 7.0, 15.0, 21.0])
-    search._bounds = {0: bounds, 1: np.array([0.0, 5.0, 13.0, 15.0, 21.0])}
-    counts = Counter(
-        search.select_configuration(node.p_data.key, r1.state, r1.move).index for _ in range(3000)
-    )
-    assert counts[0] / 3000 == pytest.approx(0.5, abs=0.03)  # off: uniform
-    search.options = PlannerOptions(r1_room=8.0)
-    counts = Counter(
-        search.select_configuration(node.p_data.key, r1.state, r1.move).index for _ in range(3000)
-    )
-    share = (2 / 8) ** 2 / ((2 / 8) ** 2 + 1.0)
-    assert counts[0] / 3000 == pytest.approx(share, abs=0.02), counts
-    # a Cross step is not weighted by room
-    cross = _cross_moves(node.p_data)[0]
-    counts = Counter(
-        search.select_configuration(node.p_data.key, cross[0], cross[1]).index for _ in range(3000)
-    )
-    assert counts[0] / 3000 == pytest.approx(0.5, abs=0.03), counts
-
-
-def test_plans_and_states_go_where_some_node_has_room_for_the_curl() -> None:
-    """A state whose plans start with an R1 curl on segment 1 (2 links in its one node) or a Cross
-    move: the curl's plan, and the state for it, weigh (2/8)**2; a second node with room lifts both."""
-    search, _ = _search("twisted", 0.0)
-    node = search.tree.nodes[0]
-    key = node.p_data.key
-    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
-    cross = _cross_moves(node.p_data)[0]
-    curl_plan = SimpleNamespace(states=[node.p_data, r1.state], moves=[r1.move])
-    cross_plan = SimpleNamespace(states=[node.p_data, cross[0]], moves=[cross[1]])
-    search.plans = {key: [curl_plan, cross_plan]}
-    search._bounds = {0: np.array([0.0, 5.0, 7.0, 15.0, 21.0])}
-    picks = Counter(search.select_plan(key)[0] for _ in range(3000))
-    assert picks[0] / 3000 == pytest.approx(0.5, abs=0.03)  # off: uniform
-    search.options = PlannerOptions(r1_room=8.0)
-    assert search.plan_rooms(key) == pytest.approx([(2 / 8) ** 2, 1.0])
-    picks = Counter(search.select_plan(key)[0] for _ in range(3000))
-    assert picks[0] / 3000 == pytest.approx((2 / 8) ** 2 / ((2 / 8) ** 2 + 1.0), abs=0.02), picks
-    search.plans = {key: [curl_plan]}  # the state's weight is its best plan's room
-    search._plan_rooms.clear()
-    assert search.plan_rooms(key) == pytest.approx([(2 / 8) ** 2])
-    search.tree.add(Node(1, 0, node.q, node.points, node.p_data, None, 0, 0))
-    search._bounds[1] = np.array([0.0, 5.0, 13.0, 15.0, 21.0])
-    assert search.plan_rooms(key) == [1.0]  # the cache follows the state's nodes
-
-
-def test_a_state_whose_nodes_leave_no_room_for_its_curls_is_chosen_less() -> None:
-    search, _ = _search("twisted", 0.0)
-    node = search.tree.nodes[0]
-    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1" and s.move.segment == 1)
-    cross = _cross_moves(r1.state)[0]
-    search.tree.add(Node(1, 0, node.q, node.points, r1.state, None, 0, 0))
-    a, b = node.p_data, r1.state
-    search.plans = {
-        a.key: [SimpleNamespace(states=[a, r1.state], moves=[r1.move])],
-        b.key: [SimpleNamespace(states=[b, cross[0]], moves=[cross[1]])],
-    }
-    search._bounds = {0: np.array([0.0, 5.0, 7.0, 15.0, 21.0])}  # segment 1 of a: 2 links
-    weights = {a.key: 1.0 + a.cross, b.key: 1.0 + b.cross}
-    for room, r1_room in ((1.0, 0.0), ((2 / 8) ** 2, 8.0)):
-        search.options = PlannerOptions(r1_room=r1_room)
-        picks = Counter(search.select_topological_state() for _ in range(3000))
-        share = weights[a.key] * room / (weights[a.key] * room + weights[b.key])
-        assert picks[a.key] / 3000 == pytest.approx(share, abs=0.025), (r1_room, picks)
-
-
-def test_r1_room_is_checked_and_runs_stored_before_it_choose_without_it() -> None:
     with pytest.raises(PlanInputError, match=r"r1_room must be a number of links in \[0, 21\], got -1"):
         planner_options({"r1_room": -1.0})
-    stored = PlannerOptions(r1_room=8.0).to_dict()
-    del stored["r1_room"]
-    assert PlannerOptions.from_dict(stored).r1_room == 0.0
-    assert SEARCH_N_LINKS == N_LINKS  # the planner's copy of the rope's link count
+    stored = PlannerOptions(cross_move=0.5, r1_room=4.0).to_dict()
+    assert PlannerOptions.from_dict(stored).cross_move == 0.5
+    del stored["cross_move"], stored["r1_room"]
+    assert (
+        PlannerOptions.from_dict(stored).cross_move == 0.0 and PlannerOptions.from_dict(stored).r1_room == 0.0
+    )
+    assert PLANNER_N_LINKS == N_LINKS  # the planner's copy of the rope's link count

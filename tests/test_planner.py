@@ -12,7 +12,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +29,6 @@ from twisted.planner import (
     RandomCurves,
     SearchTree,
     Twisted,
-    pair_key,
     planner_options,
     replay,
     resume_search,
@@ -40,6 +38,7 @@ from twisted.planner import (
 from twisted.runtime import StopSignals
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
+from twisted.store.models import Run
 from twisted.store.search import SearchCheckpoint, SearchNode, SearchRunRow, load_run
 from twisted.topology import EMPTY, PData, parse_p_data
 
@@ -175,77 +174,20 @@ STATES_0_1_2 = ["[]", ONE_CROSSING, '[[1,"O",4,"+"],[2,"O",3,"+"],[3,"U",2,"+"],
 GOAL_3 = '[[1,"O",6,"+"],[2,"O",5,"+"],[3,"O",4,"+"],[4,"U",3,"+"],[5,"U",2,"+"],[6,"U",1,"+"]]'
 
 
-def test_crs_weights_states_by_one_plus_crossings() -> None:
-    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3)
-    assert len(search.candidate_states) == 3, "every state here is on the way to the goal"
-    counts = Counter(search.select_topological_state() for _ in range(6000))
-    shares = np.array([counts[parse_p_data(s).key] for s in STATES_0_1_2]) / 6000
-    assert np.allclose(shares, [1 / 6, 2 / 6, 3 / 6], atol=0.03), shares
+# (each selection on its own, rnd / crs / ucb, the retry weight and the R1 room: tests/test_strategies.py)
 
 
-def test_the_state_prior_sinks_a_state_whose_steps_keep_failing() -> None:
-    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=20.0)
-    keys = [parse_p_data(s).key for s in STATES_0_1_2]
-    assert np.allclose(search.step_ratios(keys), 1.0), "untried states keep the crs weight"
-    # the 2-crossing state failed 60 steps: its level has no other state, so r = n0 / (t + n0)
-    search.stats["step"][keys[2]] = [60.0, 0.0]
-    assert search.step_ratios(keys)[2] == pytest.approx(20.0 / 80.0)
-    counts = Counter(search.select_topological_state() for _ in range(6000))
-    weights = np.array([1.0, 2.0, 3.0 * 0.25])
-    shares = np.array([counts[k] for k in keys]) / 6000
-    assert np.allclose(shares, weights / weights.sum(), atol=0.03), shares
-    # n0 = 0 is the paper's crs, whatever the steps did
-    paper = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=0.0)
-    paper.stats["step"] = dict(search.stats["step"])
-    plain = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=0.0)
-    assert [paper.select_topological_state() for _ in range(50)] == [
-        plain.select_topological_state() for _ in range(50)
-    ]
-
-
-def test_the_state_prior_compares_a_state_with_its_own_crossing_level() -> None:
-    search = _search_with_states(STATES_0_1_2, "crs", GOAL_3, state_prior=20.0)
-    keys = [parse_p_data(s).key for s in STATES_0_1_2]
-    # the root's steps succeed half the time, the 1-crossing state's one time in ten: each is the
-    # only state of its level, so neither is judged against the other (judged against the root the
-    # second would sink to about 0.3; the level rate's +1 / +2 keeps it near, not at, 1)
-    search.stats["step"][keys[0]] = [40.0, 20.0]
-    search.stats["step"][keys[1]] = [40.0, 4.0]
-    ratios = search.step_ratios(keys)
-    assert ratios[0] == pytest.approx(1.0, abs=0.15) and ratios[1] == pytest.approx(1.0, abs=0.15)
-    # a second 1-crossing state (off every plan, but its steps count toward the level) never succeeds:
-    # against it the first one now beats its level and rises, and it sinks
-    wrong = parse_p_data('[[1,"O",2,"-"],[2,"U",1,"-"]]')
-    search.tree.add(Node(3, 0, search.tree.nodes[0].q, search.tree.nodes[0].points, wrong, None, 0, 0))
-    search.stats["step"][wrong.key] = [40.0, 0.0]
-    high, low = search.step_ratios([keys[1], wrong.key])
-    assert high > 1.3 and low < 0.5, (high, low)
-
-
-def test_rnd_is_uniform_over_states() -> None:
-    search = _search_with_states(STATES_0_1_2, "rnd", GOAL_3)
-    counts = Counter(search.select_topological_state() for _ in range(6000))
-    shares = np.array([counts[parse_p_data(s).key] for s in STATES_0_1_2]) / 6000
-    assert np.allclose(shares, [1 / 3] * 3, atol=0.03), shares
-
-
-def test_ucb_prefers_the_state_whose_plans_advance() -> None:
-    search = _search_with_states(STATES_0_1_2, "ucb", GOAL_3)
-    keys = [parse_p_data(s).key for s in STATES_0_1_2]
-    # untried: the prior prefers depth, like crs
-    assert search.select_topological_state() == keys[2]
-    for _ in range(20):
-        search.learn(keys[2], 0, 0.0)  # the deep state never advances
-        search.learn(keys[1], 0, 0.3)
-        search.learn(keys[0], 0, 1.0)  # the root always does
-    assert search.select_topological_state() == keys[0]
-    # a state never tried keeps an exploration bonus that beats a well-known good one
-    search.plans["new"] = search.plans[keys[0]]
-    search.tree.states["new"] = parse_p_data(STATES_0_1_2[1])
-    assert search.select_topological_state() == "new"
-    # each plan of a state is tried once before the bandit exploits
-    tried = {search.select_plan(keys[1])[0] for _ in range(1)}
-    assert tried == {0}
+def test_the_search_asks_its_parts_with_its_own_generator() -> None:
+    """Two searches with one seed make the same choices; the choices are those of the parts."""
+    a = _search_with_states(STATES_0_1_2, "crs", GOAL_3)
+    b = _search_with_states(STATES_0_1_2, "crs", GOAL_3)
+    picks = [a.select_topological_state() for _ in range(30)]
+    assert picks == [b.select_topological_state() for _ in range(30)]
+    assert set(picks) <= set(a.candidate_states) and len(set(picks)) == 3
+    s = picks[0]
+    index, plan = a.select_plan(s)
+    assert plan is a.plans[s][index]
+    assert a.select_configuration(s, plan.states[1], plan.moves[0]).p_data.key == s
 
 
 def test_states_off_every_plan_are_not_candidates() -> None:
@@ -253,22 +195,6 @@ def test_states_off_every_plan_are_not_candidates() -> None:
     wrong = '[[1,"O",2,"-"],[2,"U",1,"-"]]'
     search = _search_with_states(["[]", wrong], "crs", GOAL_3)
     assert search.candidate_states == [EMPTY.key]
-
-
-@pytest.mark.parametrize(("retry_weight", "share"), [(0.1, 0.1 / 1.1), (1.0, 0.5)])
-def test_a_node_already_asked_for_the_next_state_is_chosen_with_the_retry_weight(
-    retry_weight: float, share: float
-) -> None:
-    # two nodes in the straight state; node 0 was asked once for the 1-crossing state
-    search = _search_with_states(["[]", "[]"], "crs", ONE_CROSSING, retry_weight=retry_weight)
-    one = parse_p_data(ONE_CROSSING)
-    search.stats["pair"][pair_key(0, one.key)] = [1.0, 0.0]
-    counts = Counter(search.select_configuration(EMPTY.key, one).index for _ in range(4000))
-    assert counts[0] / 4000 == pytest.approx(share, abs=0.025), counts
-    # another next state: neither node was asked for it, the choice is uniform
-    other = parse_p_data(STATES_0_1_2[2])
-    counts = Counter(search.select_configuration(EMPTY.key, other).index for _ in range(4000))
-    assert counts[0] / 4000 == pytest.approx(0.5, abs=0.025), counts
 
 
 def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path) -> None:
@@ -285,12 +211,35 @@ def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path)
 
 def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() -> None:
     stored = PlannerOptions(seed=3).to_dict()
-    del stored["retry_weight"], stored["state_prior"]
+    del stored["retry_weight"]
     assert PlannerOptions.from_dict(stored).retry_weight == 1.0
-    assert PlannerOptions.from_dict(stored).state_prior == 0.0
-    assert PlannerOptions().retry_weight < 1.0 and PlannerOptions().state_prior == 0.0
+    assert PlannerOptions().retry_weight < 1.0
     with pytest.raises(PlanInputError, match=r"retry_weight must lie in \(0, 1\], got 0"):
         planner_options({"retry_weight": 0.0})
+
+
+def test_a_run_stored_with_a_removed_option_is_refused_unless_it_had_no_effect(tmp_path: Path) -> None:
+    """--state-prior was removed: a run searched with it (n0 > 0) cannot continue as another search;
+    one that stored the value without effect (0, the default of its day) resumes as before."""
+    goal = check_goal(ONE_CROSSING)
+    options = PlannerOptions(planner="random-low", seed=2, k=2, p_expand=0.0)
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        runs = []
+        for prior in (50.0, 0.0):
+            search = start_search(store, goal, options, pool)
+            search.run(max_iterations=1)
+            with store.session(write=True) as session:
+                row = session.get(Run, search.run_id)
+                assert row is not None
+                row.parameters = {**row.parameters, "state_prior": prior}
+            runs.append(search.run_id)
+        with pytest.raises(PlanInputError, match=rf"run {runs[0]} cannot be continued: .*state_prior 50.0"):
+            resume_search(store, runs[0], pool)
+        info = load_run(store, runs[0], with_nodes=False)
+        assert info is not None and info.holder is None  # refused before its lease was taken
+        assert resume_search(store, runs[1], pool).run(max_iterations=2).iterations == 2
+    code, out = _plan(_db(tmp_path), "--resume", str(runs[0]), "--workers", "1")
+    assert code == 2 and "--state-prior was removed" in " ".join(out.split()), out
 
 
 # --- persistence: checkpoint, resume, determinism ----------------------------------------------------------

@@ -31,6 +31,7 @@ from twisted.planner.search import (
     SearchTree,
     Twisted,
 )
+from twisted.planner.strategies import Parts, PullTest, default_parts
 from twisted.runtime import StopSignals
 from twisted.topology import PData
 
@@ -46,7 +47,9 @@ __all__ = [
     "planner_options",
     "replay",
     "resume_search",
+    "search_parts",
     "start_search",
+    "stored_options",
     "straight_rope",
     "tree_from_rows",
 ]
@@ -141,6 +144,29 @@ def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
     return Node(index=0, parent=None, q=q, points=points, p_data=p_data, curve=None, iteration=0, sim_call=0)
 
 
+def stored_options(parameters: Mapping[str, Any], run_id: int | None = None) -> PlannerOptions:
+    """The options a run stored (:meth:`PlannerOptions.from_dict`); PlanInputError when it used an
+    option that was removed, so that it cannot be continued with other behaviour."""
+    try:
+        return PlannerOptions.from_dict(parameters)
+    except ValueError as exc:
+        run = "the run" if run_id is None else f"run {run_id}"
+        raise PlanInputError(f"{run} cannot be continued: {exc}; start a new run") from None
+
+
+def search_parts(options: PlannerOptions, goal: Goal, sampler: CurveSampler | None, recorder: Any) -> Parts:
+    """The parts of a search (:func:`twisted.planner.strategies.default_parts`); with ``tighten`` the goal
+    test is the pull test, each one stored with the run through ``recorder``."""
+    goal_test = None
+    if options.tighten:
+
+        def record(node: Node, result: Any, ties: bool) -> None:
+            recorder.record_tightening(node, result, goal, ties)
+
+        goal_test = PullTest(goal, record)
+    return default_parts(options, goal, sampler, goal_test)
+
+
 def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None = None) -> PlannerOptions:
     """The options of a search from those asked for (a value of None: not given, the default).
 
@@ -149,7 +175,7 @@ def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None =
     """
     asked = {name: value for name, value in given.items() if value is not None}
     if stored is not None:
-        kept = PlannerOptions.from_dict(dict(stored)).to_dict()
+        kept = stored_options(stored).to_dict()
         clash = [f"--{n.replace('_', '-')} {v} (run has {kept[n]})" for n, v in asked.items() if kept[n] != v]
         if clash:
             message = f"a resumed run keeps its own search options; drop or fix: {', '.join(clash)}"
@@ -337,7 +363,7 @@ def start_search(
         options,
         pool,
         high_level(store, goal, options.plan_limit),
-        sampler=sampler,
+        parts=search_parts(options, goal, sampler, recorder),
         recorder=recorder,
         run_id=recorder.run_id,
         stop=stop,
@@ -384,6 +410,7 @@ def resume_search(
         raise PlanInputError(f"run {run_id} is not a planner run in this database")
     if info.checkpoint is None:
         raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
+    options = stored_options(info.parameters, run_id)  # before the lease: a refused run stays as it is
     try:
         take_lease(store, run_id)  # from here on this process is the run's one writer
     except (LookupError, RunBusyError) as exc:
@@ -391,7 +418,6 @@ def resume_search(
     discard_after_checkpoint(store, run_id)  # only after a write outside SearchRun; normally none
     info = load_run(store, run_id)
     assert info is not None and info.checkpoint is not None
-    options = PlannerOptions.from_dict(info.parameters)
     tree = tree_from_rows(info.nodes)
     checkpoint = Checkpoint(
         iteration=info.checkpoint.iteration,
@@ -410,7 +436,7 @@ def resume_search(
         options,
         pool,
         high_level(store, info.goal, options.plan_limit),
-        sampler=sampler,
+        parts=search_parts(options, info.goal, sampler, recorder),
         recorder=recorder,
         checkpoint=checkpoint,
         run_id=run_id,

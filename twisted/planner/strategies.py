@@ -1,0 +1,476 @@
+"""The parts Algorithm 1 is built from: how it selects a state, a plan and a node, where the curves of a
+plan step come from, and when a reached node ends the search.
+
+:class:`twisted.planner.search.Twisted` runs the loop and keeps the tree and the statistics; each
+decision in it is one of the small classes here, handed in as a :class:`Parts` bundle (the way a
+Monte Carlo tree search takes its evaluator and child-selection function):
+
+- state selection (``StateSelection``): :class:`UniformStates` (rnd), :class:`CrossingStates` (crs,
+  weight ``1 + Cross(s)``), :class:`UcbStates` (ucb, a bandit rewarded by the plan steps achieved);
+- plan selection (``PlanSelection``): :class:`UniformPlans` (rnd, crs), :class:`UcbPlans` (ucb);
+- node selection (``NodeSelection``): :class:`RetryWeightedNodes` (a node already asked for the plan's
+  next state weighs ``retry_weight ** n``; 1 is the paper's uniform choice);
+- :class:`R1Room`: the room a node's segment leaves for an R1 curl, shared by the three selections
+  above when ``r1_room > 0`` (DESIGN 8);
+- curve proposers (``CurveSampler``): the inverse model (``twisted.model.sampler.ModelCurves``), a SAC
+  policy (``twisted.rl``), :class:`RandomCurves`, :class:`ScriptedCross` (``twisted.proposals``);
+  :class:`StepCurves` draws a plan step's K curves from them;
+- goal tests (``GoalTest``): :class:`StateMatch` (a goal state reached) and :class:`PullTest` (and the
+  rope pulled tight ties the goal's knot, ``twisted.tighten``).
+
+:func:`default_parts` builds the parts that :class:`~twisted.planner.options.PlannerOptions` name
+(the pull test excepted: :mod:`twisted.planner.session` adds it with the run's recorder). Every random
+choice takes the search's one ``numpy.random.Generator``; the parts that keep state (only
+:class:`R1Room`, a cache) forget what an unfinished iteration added (:meth:`Parts.forget`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from twisted.goals import Goal
+from twisted.planner.options import PlannerOptions
+from twisted.planner.tree import Node, SearchTree, pair_key
+from twisted.topology import PData
+
+__all__ = [
+    "R1_ROOM_FLOOR",
+    "BlindCurves",
+    "CrossingStates",
+    "CurveSampler",
+    "GoalTest",
+    "NodeSelection",
+    "Parts",
+    "PlanSelection",
+    "PullTest",
+    "R1Room",
+    "RandomCurves",
+    "RetryWeightedNodes",
+    "ScriptedCross",
+    "SearchView",
+    "StateMatch",
+    "StateSelection",
+    "StepCurves",
+    "UcbPlans",
+    "UcbStates",
+    "UniformPlans",
+    "UniformStates",
+    "default_parts",
+]
+
+# the least node weight r1_room gives (a curl on a segment of a link or less almost never works)
+R1_ROOM_FLOOR = 0.02
+
+
+class SearchView(Protocol):
+    """What the parts read of a search (:class:`~twisted.planner.search.Twisted`): the tree, the plans
+    from every reached state, the statistics tables and the goal."""
+
+    tree: SearchTree
+    plans: dict[str, list[Any]]
+    stats: dict[str, dict[str, list[float]]]
+    goal: Goal
+
+
+def _draw(weights: list[float] | np.ndarray, rng: np.random.Generator) -> int:
+    """An index drawn with ``weights``; while all are equal the uniform draw, which takes the random
+    number a uniform choice takes (so a weight that changes nothing replays the uniform choice)."""
+    if min(weights) == max(weights):
+        return int(rng.integers(len(weights)))
+    return int(rng.choice(len(weights), p=np.array(weights) / sum(weights)))
+
+
+# --- the room for an R1 curl --------------------------------------------------------------------------
+
+
+class R1Room:
+    """How much rope a node has on a segment for an R1 curl: ``(length / links) ** 2`` in links, between
+    :data:`R1_ROOM_FLOOR` and 1 (DESIGN 8). Segment bounds are cached per node, the best room per
+    segment per state."""
+
+    def __init__(self, links: float) -> None:
+        if not links > 0.0:
+            raise ValueError(f"R1Room needs a positive number of links, got {links}")
+        self.links = links
+        self._bounds: dict[int, Any] = {}  # node index -> segment_bounds of its points
+        # state -> (its nodes weighed, best room per R1 segment, plan_rooms)
+        self._plan_rooms: dict[str, tuple[int, dict[int, float], list[float]]] = {}
+
+    def node_weight(self, node: Node, segment: int) -> float:
+        bounds = self._bounds.get(node.index)
+        if bounds is None:
+            from twisted.proposals import segment_bounds
+
+            bounds = self._bounds[node.index] = segment_bounds(node.points)
+        length = float(bounds[segment + 1] - bounds[segment])
+        return max(R1_ROOM_FLOOR, min(1.0, length / self.links) ** 2)
+
+    def plan_rooms(self, search: SearchView, s: str) -> list[float]:
+        """Per plan of ``s``: 1, or for a plan that starts with an R1 curl the most room any node of
+        ``s`` has for it. Only the nodes ``s`` gained since the last call are weighed."""
+        indices = search.tree.by_state[s]
+        cached = self._plan_rooms.get(s)
+        if cached is not None and cached[0] == len(indices):
+            return cached[2]
+        seen, best = (cached[0], cached[1]) if cached is not None else (0, {})
+        nodes, new = search.tree.nodes, indices[seen:]
+        for segment in best:
+            best[segment] = max(best[segment], *(self.node_weight(nodes[i], segment) for i in new))
+        rooms = []
+        for plan in search.plans[s]:
+            move = plan.moves[0]
+            if move.kind != "R1":
+                rooms.append(1.0)
+                continue
+            if move.segment not in best:
+                best[move.segment] = max(self.node_weight(nodes[i], move.segment) for i in indices)
+            rooms.append(best[move.segment])
+        self._plan_rooms[s] = (len(indices), best, rooms)
+        return rooms
+
+    def forget(self, committed: int) -> None:
+        """Drop what was cached about the nodes from ``committed`` on (an iteration rolled back)."""
+        for index in [index for index in self._bounds if index >= committed]:
+            del self._bounds[index]
+        self._plan_rooms.clear()
+
+
+# --- SelectTopologicalState ----------------------------------------------------------------------------
+
+
+class StateSelection(Protocol):
+    def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
+        """One of ``candidates`` (reached states with a plan, in order of first reach)."""
+        ...
+
+
+class UniformStates:
+    """rnd: every candidate state alike."""
+
+    def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
+        return candidates[int(rng.integers(len(candidates)))]
+
+
+class CrossingStates:
+    """crs: weight ``1 + Cross(s)``; with an :class:`R1Room`, times the room of the best plan of ``s``."""
+
+    def __init__(self, room: R1Room | None = None) -> None:
+        self.room = room
+
+    def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
+        weights = np.array([1.0 + search.tree.states[key].cross for key in candidates])
+        if self.room is not None:
+            room = self.room
+            weights = weights * np.array([max(room.plan_rooms(search, key)) for key in candidates])
+        return candidates[int(rng.choice(len(candidates), p=weights / weights.sum()))]
+
+
+class UcbStates:
+    """ucb: upper confidence bound over the states, rewarded by the share of plan steps achieved
+    (``stats["state"]``). Each state starts with one pseudo-observation worth
+    ``(1 + Cross(s)) / (1 + Cross(goal))``, so an untried state is preferred by depth as in crs instead
+    of forcing a round over every state."""
+
+    def __init__(self, c: float) -> None:
+        self.c = c
+
+    def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
+        stats = search.stats["state"]
+        total = sum(stats.get(key, [0.0, 0.0])[0] for key in candidates)
+        best, best_score = candidates[0], -math.inf
+        for key in candidates:
+            n, reward = stats.get(key, [0.0, 0.0])
+            prior = (1.0 + search.tree.states[key].cross) / (1.0 + search.goal.cross)
+            bonus = self.c * math.sqrt(math.log(1.0 + total) / (n + 1.0))
+            score = (reward + prior) / (n + 1.0) + bonus
+            if score > best_score:
+                best, best_score = key, score
+        return best
+
+
+# --- SelectPlan ------------------------------------------------------------------------------------------
+
+
+class PlanSelection(Protocol):
+    def select(self, search: SearchView, s: str, rng: np.random.Generator) -> int:
+        """The index of a plan of ``search.plans[s]``."""
+        ...
+
+
+class UniformPlans:
+    """rnd, crs: every plan alike; with an :class:`R1Room`, a plan that starts with a curl weighs the
+    room of the best node of ``s`` for it."""
+
+    def __init__(self, room: R1Room | None = None) -> None:
+        self.room = room
+
+    def select(self, search: SearchView, s: str, rng: np.random.Generator) -> int:
+        rooms = self.room.plan_rooms(search, s) if self.room is not None else [1.0]
+        if min(rooms) == max(rooms):
+            return int(rng.integers(len(search.plans[s])))
+        return _draw(rooms, rng)
+
+
+class UcbPlans:
+    """ucb: each plan of the state once, then the upper confidence bound (``stats["plan"]``)."""
+
+    def __init__(self, c: float) -> None:
+        self.c = c
+
+    def select(self, search: SearchView, s: str, rng: np.random.Generator) -> int:
+        n_state = search.stats["state"].get(s, [0.0, 0.0])[0]
+        best, best_score = 0, -math.inf
+        for index in range(len(search.plans[s])):
+            n, reward = search.stats["plan"].get(f"{s}|{index}", [0.0, 0.0])
+            if n == 0:
+                return index
+            score = reward / n + self.c * math.sqrt(math.log(1.0 + n_state) / n)
+            if score > best_score:
+                best, best_score = index, score
+        return best
+
+
+# --- SelectConfiguration ------------------------------------------------------------------------------
+
+
+class NodeSelection(Protocol):
+    def select(
+        self, search: SearchView, s: str, next_state: PData, move: Any, rng: np.random.Generator
+    ) -> Node:
+        """A node of ``T`` in state ``s`` to ask for ``next_state`` (by ``move``)."""
+        ...
+
+
+class RetryWeightedNodes:
+    """Weight ``retry_weight ** n`` for a node already asked ``n`` times for ``next_state`` (the ``pair``
+    statistics); with an :class:`R1Room` and an R1 ``move``, times the node's room for the curl.
+
+    A plan step succeeds or fails by its (node, next state) pair far more than by the curves drawn
+    (DESIGN 8), so the untried configurations of a state go first. While every weight is equal the
+    draw is uniform and takes the random number the paper's choice takes: ``retry_weight = 1``
+    replays the paper's choice.
+    """
+
+    def __init__(self, retry_weight: float, room: R1Room | None = None) -> None:
+        if not 0.0 < retry_weight <= 1.0:
+            raise ValueError(f"retry_weight must lie in (0, 1], got {retry_weight}")
+        self.retry_weight = retry_weight
+        self.room = room
+
+    def select(
+        self, search: SearchView, s: str, next_state: PData, move: Any, rng: np.random.Generator
+    ) -> Node:
+        indices = search.tree.by_state[s]
+        pairs, key = search.stats["pair"], next_state.key
+        weights = [self.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
+        if self.room is not None and move is not None and move.kind == "R1":
+            nodes, room = search.tree.nodes, self.room
+            weights = [
+                w * room.node_weight(nodes[i], move.segment) for w, i in zip(weights, indices, strict=True)
+            ]
+        return search.tree.nodes[indices[_draw(weights, rng)]]
+
+
+# --- curve proposers ------------------------------------------------------------------------------------
+
+
+class CurveSampler(Protocol):
+    """Proposes curves that should move the rope of ``node`` to ``next_state`` (by ``move``)."""
+
+    name: str
+
+    def sample(
+        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]: ...
+
+
+class BlindCurves(Protocol):
+    """Proposes curves with no next state in view (RandomExpand, the low-level-only baseline)."""
+
+    name: str
+
+    def sample(
+        self, node: Node, next_state: PData | None, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]: ...
+
+
+class RandomCurves:
+    """Uniformly random curves over the action ranges (the baselines, and RandomExpand)."""
+
+    name = "random"
+
+    def sample(
+        self, node: Node, next_state: PData | None, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]:
+        from twisted.sim import sample_curve
+
+        return [sample_curve(rng) for _ in range(n)]
+
+
+class ScriptedCross:
+    """The scripted Cross move curve (:func:`twisted.proposals.cross_move_curve`): the tip, or the
+    crossed segment, lifted across with the move's sign. Only for Cross moves."""
+
+    name = "cross_move"
+    kind = "Cross"
+
+    def sample(
+        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]:
+        from twisted.proposals import cross_move_curve
+
+        if move is None or move.kind != self.kind:
+            raise ValueError(f"the scripted Cross curve makes Cross moves, not {move}")
+        return [cross_move_curve(rng, node.points, move) for _ in range(n)]
+
+
+class ScriptedMove(Protocol):
+    """A curve proposer for one kind of move (:class:`ScriptedCross`)."""
+
+    name: str
+    kind: str
+
+    def sample(
+        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
+    ) -> list[Any]: ...
+
+
+class StepCurves:
+    """The K curves of a plan step: for a step toward the move ``script`` makes (default
+    :class:`ScriptedCross`), ``round(share * K)`` scripted curves first, then the rest from ``sampler``;
+    every other step all K from ``sampler``.
+
+    :meth:`propose` returns the curves, scripted first, and how many are scripted; the search counts
+    the curves and hits of each proposer of a step toward the script's move (the ``cross`` statistics).
+    A removing move (``move.remove``) is never scripted.
+    """
+
+    def __init__(self, sampler: CurveSampler, script: ScriptedMove | None = None, share: float = 0.0) -> None:
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"the scripted share must lie in [0, 1], got {share}")
+        self.sampler, self.share = sampler, share
+        self.script: ScriptedMove = script if script is not None else ScriptedCross()
+
+    def propose(
+        self, node: Node, next_state: PData, move: Any, k: int, rng: np.random.Generator
+    ) -> tuple[list[Any], int]:
+        scripted = 0
+        if move is not None and move.kind == self.script.kind and not move.remove:
+            scripted = min(k, int(round(self.share * k)))
+        curves = self.script.sample(node, next_state, move, scripted, rng) if scripted else []
+        if scripted < k:
+            curves += self.sampler.sample(node, next_state, move, k - scripted, rng)
+        return curves, scripted
+
+
+# --- the goal test ------------------------------------------------------------------------------------------
+
+
+class GoalTest(Protocol):
+    """Whether a node ends the search; ``tests`` counts the costly checks run (pull tests)."""
+
+    tests: int
+
+    def accepts(self, node: Node, *, record: bool = True) -> bool:
+        """``record``: store what the check found (False while a resumed run re-reads its tree)."""
+        ...
+
+
+class StateMatch:
+    """The paper's goal test: the node's P-data is a goal state."""
+
+    tests = 0
+
+    def __init__(self, goal: Goal) -> None:
+        self.goal = goal
+
+    def accepts(self, node: Node, *, record: bool = True) -> bool:
+        return node.p_data in self.goal
+
+
+class PullTest:
+    """A goal state reached, and the rope pulled tight (:func:`twisted.tighten.tighten`) ties the goal's
+    knot. The pull test is deterministic; ``record(node, result, ties)`` stores each one."""
+
+    def __init__(self, goal: Goal, record: Callable[[Node, Any, bool], None] | None = None) -> None:
+        self.goal = goal
+        self.record = record
+        self.tests = 0
+        self._sim: Any = None
+
+    def accepts(self, node: Node, *, record: bool = True) -> bool:
+        if node.p_data not in self.goal:
+            return False
+        from twisted.tighten import tighten, tightening_sim
+
+        if self._sim is None:
+            self._sim = tightening_sim()
+        result = tighten(self._sim, node.q)
+        ties = result.ok and self.goal.tightened_ties(result.knot_name)
+        self.tests += 1
+        if record and self.record is not None:
+            self.record(node, result, ties)
+        return ties
+
+
+# --- the bundle -----------------------------------------------------------------------------------------
+
+
+@dataclass
+class Parts:
+    """What one search is built from (see the module's docstring)."""
+
+    states: StateSelection
+    plans: PlanSelection
+    nodes: NodeSelection
+    step_curves: StepCurves
+    expand_curves: BlindCurves  # RandomExpand's curves (and the low-level-only baseline's)
+    goal_test: GoalTest
+    room: R1Room | None = None  # the cache the selections share, forgotten on rollback
+
+    def forget(self, committed: int) -> None:
+        """An unfinished iteration was rolled back to ``committed`` nodes: drop what it cached."""
+        if self.room is not None:
+            self.room.forget(committed)
+
+
+def default_parts(
+    options: PlannerOptions,
+    goal: Goal,
+    sampler: CurveSampler | None = None,
+    goal_test: GoalTest | None = None,
+) -> Parts:
+    """The parts ``options`` name: heuristic -> state and plan selection, ``retry_weight`` and ``r1_room``
+    -> node selection (and the room the crs and plan choices weigh), ``cross_move`` -> the scripted share
+    of a Cross step (planner twisted); ``sampler`` (None: random curves) proposes the other curves.
+    ``goal_test`` defaults to :class:`StateMatch`; with ``options.tighten`` it must be given (a
+    :class:`PullTest`, as :mod:`twisted.planner.session` makes it)."""
+    if goal_test is None:
+        if options.tighten:
+            raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
+        goal_test = StateMatch(goal)
+    room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
+    states: StateSelection
+    plans: PlanSelection
+    if options.heuristic == "ucb":
+        states, plans = UcbStates(options.ucb_c), UcbPlans(options.ucb_c)
+    elif options.heuristic == "rnd":
+        states, plans = UniformStates(), UniformPlans(room)
+    else:
+        states, plans = CrossingStates(room), UniformPlans(room)
+    random_curves = RandomCurves()
+    share = options.cross_move if options.planner == "twisted" else 0.0
+    return Parts(
+        states=states,
+        plans=plans,
+        nodes=RetryWeightedNodes(options.retry_weight, room),
+        step_curves=StepCurves(sampler if sampler is not None else random_curves, ScriptedCross(), share),
+        expand_curves=random_curves,
+        goal_test=goal_test,
+        room=room,
+    )
