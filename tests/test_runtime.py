@@ -120,6 +120,16 @@ def test_cpu_cores_are_the_cores_this_process_may_use_not_the_machines() -> None
     assert proc.stdout.strip() == "1"
 
 
+def test_a_process_is_alive_until_it_has_ended_and_been_reaped() -> None:
+    child = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        assert runtime.process_alive(os.getpid()) and runtime.process_alive(child.pid)
+    finally:
+        child.communicate(b"", timeout=60)
+    assert not runtime.process_alive(child.pid)  # reaped: the pid names no process now
+    assert not any(runtime.process_alive(pid) for pid in (0, -1, 2**22 + 12345, 2**40))
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_eval_stopped_by_a_signal_exits_128_plus_it(sqlite_url: str, signum: signal.Signals) -> None:
     """eval used to exit 130 for SIGTERM too (and print a stray "while starting" line after Ctrl-C)."""

@@ -175,6 +175,19 @@ def cpu_cores() -> int:
         return os.cpu_count() or 1
 
 
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` of this host still runs (one of another user counts: it exists)."""
+    if pid <= 0:
+        return False  # 0 and -n would ask about process groups
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, OverflowError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 # --- the planner's stop request ------------------------------------------------------------------------
 
 

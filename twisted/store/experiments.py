@@ -44,6 +44,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import KNOT_PREFIX
+from twisted.runtime import process_alive
 from twisted.store.models import Base, RunLifecycle, utcnow
 from twisted.topology import PData, parse_p_data
 
@@ -363,12 +364,4 @@ def pid_alive(host: str | None, pid: int | None) -> bool:
     """Whether a process of this host still runs (other hosts: assumed alive, cannot be checked)."""
     if host != socket.gethostname():
         return host is not None
-    if pid is None:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    return pid is not None and process_alive(pid)

@@ -19,6 +19,7 @@ from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
 from twisted.knots import identify
+from twisted.runtime import process_alive
 from twisted.store.models import (
     CollectBatch,
     CollectTry,
@@ -72,16 +73,6 @@ def end_run(
     session.execute(update(Run).where(Run.id == run_id).values(**values))
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 STALE_RUN_MESSAGE = "process ended without closing the run (killed?)"
 
 
@@ -97,7 +88,7 @@ def mark_stale_runs(session: Session, kind: str) -> list[int]:
         for run in session.scalars(
             select(Run).where(Run.kind == kind, Run.status == "running", Run.host == host)
         )
-        if run.pid is None or not _pid_alive(run.pid)
+        if run.pid is None or not process_alive(run.pid)
     ]
     for run_id in stale:
         last = session.scalar(

@@ -52,6 +52,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal, PlanInputError, state_goal
+from twisted.runtime import process_alive
 from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
@@ -86,18 +87,6 @@ class RunBusyError(RuntimeError):
     """Another live process writes the run (or took it over from this one); the message names it."""
 
 
-def _process_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True  # exists, owned by someone else
-    return True
-
-
 def _other_holder(
     status: str, host: str | None, pid: int | None, last_write: dt.datetime | None = None
 ) -> str | None:
@@ -109,7 +98,7 @@ def _other_holder(
         return None
     here = socket.gethostname()
     if host == here:
-        if pid == os.getpid() or not _process_alive(pid):
+        if pid == os.getpid() or not process_alive(pid):
             return None
         return f"process {pid}"
     if last_write is None:
