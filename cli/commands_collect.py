@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import typer
@@ -198,60 +199,52 @@ def stats_command(
         print_json(stats)
         return
 
-    table = Table(title="Per crossing count")
-    for name in ("cross", "states", "configurations", "kept in", "kept out"):
-        table.add_column(name, justify="right")
-    for row in stats["by_cross"]:
-        table.add_row(
-            str(row["cross"]),
-            _num(row["states"]),
-            _num(row["configurations"]),
-            _num(row["transitions_in"]),
-            _num(row["transitions_out"]),
-        )
-    console.print(table)
+    _print_table(
+        "Per crossing count",
+        ("cross", "states", "configurations", "kept in", "kept out"),
+        [
+            [str(row["cross"])]
+            + [_num(row[k]) for k in ("states", "configurations", "transitions_in", "transitions_out")]
+            for row in stats["by_cross"]
+        ],
+    )
+    _print_table(
+        "Per knot type (both closures agree; knotoid: they differ, no knot)",
+        ("knot", "states", "visited states", "configurations"),
+        [
+            [row["knot_type"] or "-"] + [_num(row[k]) for k in ("states", "visited_states", "configurations")]
+            for row in stats["by_knot"]
+        ],
+    )
+    _print_table(
+        "Random curves by start crossing count (collect)",
+        ("from cross", "tried", "kept", "kept rate", "c->c+1", "reference", "rejected"),
+        [
+            [str(row["from_cross"]), _num(row["tried"]), _num(row["kept"])]
+            + [_pct(row[k]) for k in ("kept_rate", "plus_one_rate", "reference_plus_one_rate")]
+            + [_num(row["rejected"])]
+            for row in stats["acceptance"]
+        ],
+    )
+    _print_table(
+        "Collect runs",
+        ("run", "status", "workers", "hours", "tried", "kept", "kept/h", "kept/h/worker"),
+        [
+            [str(row[k]) for k in ("run_id", "status", "workers")]
+            + [_num((row["wall_seconds"] or 0) / 3600, ".3f")]
+            + [_num(row[k]) for k in ("tried", "kept", "kept_per_hour", "kept_per_hour_per_worker")]
+            for row in stats["runs"]
+        ],
+    )
 
-    table = Table(title="Per knot type (both closures agree; knotoid: they differ, no knot)")
-    for name in ("knot", "states", "visited states", "configurations"):
-        table.add_column(name, justify="right")
-    for row in stats["by_knot"]:
-        table.add_row(
-            row["knot_type"] or "-",
-            _num(row["states"]),
-            _num(row["visited_states"]),
-            _num(row["configurations"]),
-        )
-    console.print(table)
 
-    table = Table(title="Random curves by start crossing count (collect)")
-    for name in ("from cross", "tried", "kept", "kept rate", "c->c+1", "reference", "rejected"):
+def _print_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[str]]) -> None:
+    """A table of right-aligned columns, one line per row."""
+    table = Table(title=title)
+    for name in columns:
         table.add_column(name, justify="right")
-    for row in stats["acceptance"]:
-        table.add_row(
-            str(row["from_cross"]),
-            _num(row["tried"]),
-            _num(row["kept"]),
-            _pct(row["kept_rate"]),
-            _pct(row["plus_one_rate"]),
-            _pct(row["reference_plus_one_rate"]),
-            _num(row["rejected"]),
-        )
-    console.print(table)
-
-    table = Table(title="Collect runs")
-    for name in ("run", "status", "workers", "hours", "tried", "kept", "kept/h", "kept/h/worker"):
-        table.add_column(name, justify="right")
-    for row in stats["runs"]:
-        table.add_row(
-            str(row["run_id"]),
-            str(row["status"]),
-            str(row["workers"]),
-            _num((row["wall_seconds"] or 0) / 3600, ".3f"),
-            _num(row["tried"]),
-            _num(row["kept"]),
-            _num(row["kept_per_hour"]),
-            _num(row["kept_per_hour_per_worker"]),
-        )
+    for row in rows:
+        table.add_row(*row)
     console.print(table)
 
 
