@@ -484,14 +484,12 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
     """
     from twisted.sim import Curve, RopeSim
     from twisted.sim.pool import simulate
-    from twisted.store.search import load_run, solution_path
+    from twisted.store.search import NoPlanError, solved_run
 
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        raise PlanInputError(f"run {run_id} is not a planner run in this database")
-    path = solution_path(store, run_id)
-    if not path:
-        raise PlanInputError(f"run {run_id} has no plan to replay (outcome: {info.outcome})")
+    try:
+        info, path = solved_run(store, run_id)
+    except NoPlanError as exc:
+        raise PlanInputError(f"{exc}: nothing to replay") from None
     sim = RopeSim(friction_scale)
     state = path[0].q
     steps = []

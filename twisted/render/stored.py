@@ -127,15 +127,12 @@ def render_goal(store: Any | None, p_data: PData, out: str | Path) -> Rendered:
 
 def _solved_run(store: Any, run_id: int) -> tuple[Any, list[Any]]:
     """A planner run and the stored path of its plan; RenderError when there is none to draw."""
-    from twisted.store.search import load_run, solution_path
+    from twisted.store.search import NoPlanError, solved_run
 
-    info = load_run(store, run_id, with_nodes=False)
-    if info is None:
-        raise RenderError(f"run {run_id} is not a planner run in this database")
-    path = solution_path(store, run_id)
-    if not path:
-        raise RenderError(f"run {run_id} found no plan (outcome: {info.outcome}); nothing to draw")
-    return info, path
+    try:
+        return solved_run(store, run_id)
+    except NoPlanError as exc:
+        raise RenderError(f"{exc}: nothing to draw") from None
 
 
 def render_run(

@@ -61,6 +61,7 @@ __all__ = [
     "LEASE_STALE_S",
     "OUTCOMES",
     "DamagedRunError",
+    "NoPlanError",
     "RunBusyError",
     "SearchCheckpoint",
     "SearchNode",
@@ -72,6 +73,7 @@ __all__ = [
     "find_resumable_run",
     "load_run",
     "solution_path",
+    "solved_run",
     "take_lease",
 ]
 
@@ -591,6 +593,24 @@ def find_resumable_run(store: Any, goal: Goal | None = None) -> int | None:
         if info is not None and not info.live:
             return run_id
     return None
+
+
+class NoPlanError(LookupError):
+    """A run id that names no planner run here, or a run that found no plan; the message says which."""
+
+
+def solved_run(store: Any, run_id: int) -> tuple[SearchRunInfo, list[StoredNode]]:
+    """A planner run and the nodes of its plan, root to goal (what replay and render take).
+
+    Raises :class:`NoPlanError` when ``run_id`` is no planner run in this database or found no plan.
+    """
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise NoPlanError(f"run {run_id} is not a planner run in this database")
+    path = solution_path(store, run_id)
+    if not path:
+        raise NoPlanError(f"run {run_id} found no plan (outcome: {info.outcome})")
+    return info, path
 
 
 def solution_path(store: Any, run_id: int) -> list[StoredNode]:
