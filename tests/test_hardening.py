@@ -86,6 +86,22 @@ def _digest(path: Path) -> str:
         conn.close()
 
 
+def _searching_plan(path: Path) -> subprocess.Popen[str]:
+    """A ``plan`` (random-low, two simulator workers) in a process group of its own, so that a test can
+    signal the group, returned once its search has checkpointed two iterations."""
+    proc = _proc(
+        *("--db", f"sqlite:///{path}", "plan", "--goal", THREE_CROSSINGS, "--planner", "random-low"),
+        *("--workers", "2", "--timeout", "120", "--checkpoint-every", "0"),
+        start_new_session=True,
+    )
+    try:
+        _wait_for(path, "SELECT MAX(iteration) >= 2 FROM search_checkpoints", proc)
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    return proc
+
+
 @pytest.fixture
 def plan_db(tmp_path: Path) -> tuple[Path, str]:
     """A store with one stopped planner run (random-low, 1 iteration), run id 1."""
@@ -225,25 +241,8 @@ def test_a_signal_at_start_up_is_not_lost_even_when_the_shell_ignored_it() -> No
 def test_ctrl_c_to_the_process_group_during_the_search_leaves_the_workers_alone(tmp_path: Path) -> None:
     """Ctrl-C reaches the simulator workers too: one killed by it lost its job and the pool waited for
     that result for ever (found by bench/soak.py); the workers now leave Ctrl-C to the planner."""
-    path = tmp_path / "p.db"
-    proc = _proc(
-        "--db",
-        f"sqlite:///{path}",
-        "plan",
-        "--goal",
-        THREE_CROSSINGS,
-        "--planner",
-        "random-low",
-        "--workers",
-        "2",
-        "--timeout",
-        "120",
-        "--checkpoint-every",
-        "0",
-        start_new_session=True,
-    )
+    proc = _searching_plan(tmp_path / "p.db")
     try:
-        _wait_for(path, "SELECT MAX(iteration) >= 2 FROM search_checkpoints", proc)
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=30)
     finally:
@@ -254,25 +253,8 @@ def test_ctrl_c_to_the_process_group_during_the_search_leaves_the_workers_alone(
 
 def test_workers_of_a_killed_plan_leave_quietly(tmp_path: Path) -> None:
     """Before: after a SIGKILL of plan its simulator workers printed BrokenPipeError tracebacks."""
-    path = tmp_path / "p.db"
-    proc = _proc(
-        "--db",
-        f"sqlite:///{path}",
-        "plan",
-        "--goal",
-        THREE_CROSSINGS,
-        "--planner",
-        "random-low",
-        "--workers",
-        "2",
-        "--timeout",
-        "120",
-        "--checkpoint-every",
-        "0",
-        start_new_session=True,
-    )
+    proc = _searching_plan(tmp_path / "p.db")
     try:
-        _wait_for(path, "SELECT MAX(iteration) >= 2 FROM search_checkpoints", proc)
         workers = [int(p) for p in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
         proc.kill()
         _, err = proc.communicate(timeout=30)  # the pipe closes when the last worker has gone
