@@ -168,7 +168,9 @@ def test_render_draws_the_plan_beside_the_tightened_knot(
 
 def test_plan_with_tighten_ends_only_on_a_goal_state_that_passes_the_pull_test(tmp_path: Path) -> None:
     db = f"sqlite:///{tmp_path / 'plan-tighten.db'}"
-    result = _plan(db, "--knot", "overhand", "--tighten")
+    picture = tmp_path / "knot.png"
+    result = _plan(db, "--knot", "overhand", "--tighten", "--picture", str(picture))
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the final rope beside the taut one
     assert result["tighten"] is True and result["pull_tests"] >= 1
     reached = parse_p_data(result["reached_state"])
     with open_store(db) as store, store.session() as session:
