@@ -13,11 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import select
 
+from tests.collect_checks import check_collect_rows
 from twisted.collect import CollectError, CollectOptions, DQIndex, collect
 from twisted.sim import Curve, RopeSim
-from twisted.store import CollectBatch, Configuration, Run, TopologicalState, Transition, open_store
+from twisted.store import Configuration, Run, TopologicalState, Transition, open_store
 from twisted.topology import parse_p_data
 
 REPO = Path(__file__).resolve().parents[1]
@@ -99,41 +100,6 @@ def _gone(pids: list[int], timeout_s: float = 30) -> bool:
             return True
         time.sleep(0.2)
     return False
-
-
-def _check_consistent(url: str) -> None:
-    """Every run's counters equal its committed rows; no transition stored twice; one root."""
-    with open_store(url) as store, store.session() as session:
-        for run in session.scalars(select(Run).where(Run.kind == "collect")):
-            n_transitions = session.scalar(
-                select(func.count(Transition.id)).where(Transition.run_id == run.id)
-            )
-            batch_kept = session.scalar(
-                select(func.sum(CollectBatch.kept)).where(CollectBatch.run_id == run.id)
-            )
-            batch_tried = session.scalar(
-                select(func.sum(CollectBatch.tried)).where(CollectBatch.run_id == run.id)
-            )
-            assert run.kept == n_transitions == (batch_kept or 0)
-            assert run.tried == (batch_tried or 0)
-        curves = session.execute(
-            select(
-                Transition.from_configuration_id,
-                Transition.link,
-                Transition.z_max_m,
-                Transition.x_m,
-                Transition.y_m,
-            )
-        ).all()
-        assert len(curves) == len(set(curves)), "a transition was stored twice"
-        targets = list(session.scalars(select(Transition.to_configuration_id)))
-        assert len(targets) == len(set(targets))
-        configurations = session.scalar(select(func.count(Configuration.id)))
-        assert configurations == len(targets) + 1, "exactly one root configuration (the straight rope)"
-        rising = session.scalar(
-            select(func.count(Transition.id)).where(Transition.to_cross <= Transition.from_cross)
-        )
-        assert rising == 0
 
 
 # --- options and bad input (no simulation) ---------------------------------------------------------------
@@ -224,7 +190,7 @@ def test_collect_keeps_replayable_rising_transitions(
     assert sum(" committed: " in line for line in lines) == summary.batches
     ended = f"collect run {summary.run_id} finished: kept {summary.kept} of {summary.tried} tried"
     assert lines[-1].startswith(ended)
-    _check_consistent(sqlite_url)
+    check_collect_rows(sqlite_url)
     sim = RopeSim()
     with open_store(sqlite_url) as store, store.session() as session:
         run = session.get(Run, summary.run_id)
@@ -262,7 +228,7 @@ def test_signal_stops_cleanly_and_keeps_rows(tmp_path: Path, signum: int) -> Non
     after = set(_query(path, "SELECT id, from_configuration_id, to_configuration_id FROM transitions"))
     assert before <= after and len(after) >= 1
     assert _query(path, "SELECT status, message FROM runs") == [("interrupted", f"stopped by {signum.name}")]
-    _check_consistent(url)
+    check_collect_rows(url)
 
 
 @pytest.mark.slow
@@ -283,7 +249,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path) -> Non
     after_kill = set(_query(path, "SELECT * FROM transitions"))
     assert committed <= after_kill
     assert _query(path, "SELECT status FROM runs") == [("running",)]
-    _check_consistent(url)
+    check_collect_rows(url)
 
     resumed = _twisted(
         url, "collect", "--hours", "0.03", "--workers", "1", "--max-kept", "3", "--seed", "12", timeout_s=170
@@ -293,7 +259,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path) -> Non
     assert set(_query(path, "SELECT batch_id, tried, kept FROM collect_batches")) >= batches
     assert _query(path, "SELECT id, status FROM runs ORDER BY id") == [(1, "interrupted"), (2, "finished")]
     # the same D_Q: run 2 added no new root and started from configurations that were already there
-    _check_consistent(url)
+    check_collect_rows(url)
     starts = _query(path, "SELECT MIN(from_configuration_id) FROM transitions WHERE run_id = 2")[0][0]
     assert starts is not None
 
@@ -318,6 +284,6 @@ def test_two_collectors_share_one_sqlite_file(tmp_path: Path) -> None:
     assert len(_query(path, "SELECT DISTINCT run_id FROM transitions")) == 2  # both kept transitions
     (a_start, a_end), (b_start, b_end) = _query(path, "SELECT started_at, ended_at FROM runs ORDER BY id")
     assert a_start < b_end and b_start < a_end, "the two collectors did not run at the same time"
-    _check_consistent(url)
+    check_collect_rows(url)
     stats = _twisted(url, "stats", "--json")
     assert stats.returncode == 0 and '"acceptance"' in stats.stdout
