@@ -1,9 +1,11 @@
-"""The types of the options that are choices or lists, and the shared ``--json`` option.
+"""The types of the options that are choices or lists, the planner's options, and the shared ``--json``.
 
 Choices are Enums built from the domain's own tuples (nothing is listed twice): typer offers them as
 choices in --help and refuses anything else with exit 2 ("Invalid value for '--heuristic'") while
 the command line is parsed, before any command runs. Lists (``--seeds``, ``--from``,
-``--goal-crossings``) and ``--device`` are parsed by their option the same way.
+``--goal-crossings``) and ``--device`` are parsed by their option the same way. The planner's options
+(``--heuristic``, ``--k``, ...) come from their one declaration (``twisted.planner.options``) through
+:func:`with_planner_options`.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import typer
 
 from cli.app import MAX_SEED, shorten
 from twisted.model.config import DEVICES, LINK_HEADS, SOURCES, NetConfig, TrainConfig
-from twisted.planner.options import OptionSpec, PlannerOptions, result_options, specs
+from twisted.planner.options import OptionSpec, result_options, specs
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -32,10 +34,8 @@ CHOICES: dict[str, Any] = {
     for spec in specs()
     if spec.choices
 }
-Planner = CHOICES["planner"]
-Heuristic = CHOICES["heuristic"]
+Planner = CHOICES["planner"]  # for a command that takes --planner alone (untie)
 LinkHead = Enum("LinkHead", [(name, name) for name in LINK_HEADS], type=str)  # type: ignore[misc]
-DEFAULT_PLANNER = Planner(PlannerOptions.planner)
 DEFAULT_LINK_HEAD = LinkHead(NetConfig.link_head)
 
 
