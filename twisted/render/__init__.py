@@ -21,15 +21,7 @@ plotting library), :mod:`~twisted.render.draw` (matplotlib drawings and PNG/GIF 
 database holds: the only part that reads it). Everything is importable from ``twisted.render``.
 """
 
-from twisted.render.draw import (
-    draw_curve,
-    draw_gauss_diagram,
-    draw_knot_diagram,
-    figure_to_array,
-    panel_figure,
-    save_gif,
-    save_png,
-)
+from twisted.render.draw import draw_gauss_diagram, draw_knot_diagram, figure_to_array, save_gif, save_png
 from twisted.render.geometry import (
     ROPE_COLOUR,
     SIGN_COLOUR,
@@ -59,7 +51,6 @@ __all__ = [
     "RenderError",
     "Rendered",
     "crossing_geometry",
-    "draw_curve",
     "draw_gauss_diagram",
     "draw_knot_diagram",
     "figure_to_array",
@@ -67,7 +58,6 @@ __all__ = [
     "gl_top_views",
     "knot_zoom",
     "p_data_of_drawing",
-    "panel_figure",
     "render_configuration",
     "render_goal",
     "render_run",
