@@ -287,11 +287,12 @@ def _logged(ctx: typer.Context, state: AppState, command: Callable[[], Any], giv
 
 
 def _shown_url(url: str) -> str:
-    """``url`` with its password hidden."""
+    """``url`` with its password hidden, shortened (bytes that are not UTF-8, of a file name, as escapes)."""
     from sqlalchemy.engine import make_url
 
+    url = url.encode("utf-8", "backslashreplace").decode("utf-8")
     try:
-        return make_url(url).render_as_string(hide_password=True)
+        return shorten(make_url(url).render_as_string(hide_password=True))
     except Exception:  # malformed: open_db says so
         return shorten(url)
 
@@ -330,9 +331,11 @@ def open_db(
     ``needed_by``: the input that names something stored (e.g. ``--set easy``): a database that does not
     exist yet is then refused, naming that input, instead of created.
 
-    ``readonly``: a command that only reads (stats, db) also opens a file it may not write, without
-    writing to it. An in-memory SQLite database is refused: nothing written to it would be kept, and
-    the worker processes of collect and plan could not see it.
+    ``readonly``: a command that only reads (stats, db, models, report, ...) also opens a file it may not
+    write, without writing to it. A command that writes has an existing SQLite file checked for damaged
+    pages first (``verify``: SQLite's quick_check), so that it stops before writing to a broken store. An
+    in-memory SQLite database is refused: nothing written to it would be kept, and the worker processes
+    of collect and plan could not see it.
     """
     from twisted.store import StoreError, open_store
     from twisted.store.db import parse_url, sqlite_path
@@ -345,7 +348,7 @@ def open_db(
                 f"--db {shorten(url)}: an in-memory SQLite database keeps nothing (and worker processes "
                 "cannot share it); give a file, e.g. sqlite:///twisted.db"
             )
-        return open_store(url, create=create and needed_by is None, readonly=readonly)
+        return open_store(url, create=create and needed_by is None, readonly=readonly, verify=not readonly)
     except StoreError as exc:
         fail(f"{needed_by}: {exc}" if needed_by else str(exc))
 

@@ -202,7 +202,7 @@ def report_command(
     """Success-vs-time curves (PNG, one per set) and a Markdown table from the stored results."""
     from twisted.experiments import write_report
 
-    with open_db(ctx) as store:
+    with open_db(ctx, readonly=True) as store:
         files = write_report(store, out, sets or None)
     console.print(f"wrote {files.markdown}")
     for p in files.plots + files.sensitivity:

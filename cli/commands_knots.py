@@ -39,7 +39,7 @@ def _visits(ctx: typer.Context, keys: list[str]) -> dict[str, int] | None:
     from twisted.store.knots import configurations_per_state
 
     try:
-        store = open_store(db_url(ctx), create=False)
+        store = open_store(db_url(ctx), create=False, readonly=True)
     except StoreError as exc:
         err_console.print(f"note: no visit counts ({exc})", highlight=False)
         return None

@@ -499,7 +499,7 @@ def replay_command(
     """Re-simulate a run's plan from its initial configuration; exit 0 if it still ends in the goal."""
     from twisted.planner import PlanInputError, replay
 
-    store = open_db(ctx, needed_by=f"RUN_ID {run_id}")
+    store = open_db(ctx, readonly=not tighten, needed_by=f"RUN_ID {run_id}")  # --tighten stores a pull test
     try:
         result = replay(store, run_id, tighten=tighten)
     except PlanInputError as exc:

@@ -82,11 +82,14 @@ def problems_import(
 ) -> None:
     """Import goal sets from a JSON file (every state is checked; nothing is stored on an error)."""
     from twisted.experiments import EvalInputError, import_problem_sets
+    from twisted.experiments.problems import decode_goal_file
 
     try:
-        text = file.read_text()
+        text = decode_goal_file(file.read_bytes())
     except OSError as exc:
         fail(f"cannot read goal file {str(file)!r}: {exc.strerror}")
+    except EvalInputError as exc:
+        fail(f"{file}: {exc}")
     with open_db(ctx) as store:
         try:
             records = import_problem_sets(store, text, name)
@@ -133,7 +136,7 @@ def problems_list(
     """The stored problem sets (and the goals of one with --show)."""
     from twisted.store.experiments import list_problem_sets, load_problem_set
 
-    with open_db(ctx) as store, store.session() as session:
+    with open_db(ctx, readonly=True) as store, store.session() as session:
         sets = list_problem_sets(session)
         record = load_problem_set(session, show) if show else None
     if show and record is None:

@@ -84,7 +84,8 @@ def render_command(
     if run is not None and not tightened:
         gif_path = _output_file("--gif", gif or png.with_suffix(".gif"), ".gif")
     needs = f"--config {config}" if config is not None else None if run is None else f"--run {run}"
-    with open_db(ctx, needed_by=needs) as store:
+    # only a pull test not stored yet (--tightened) writes to the database
+    with open_db(ctx, readonly=not tightened, needed_by=needs) as store:
         try:
             if config is not None:
                 rendered = render_configuration(store, config, png, gl=gl)

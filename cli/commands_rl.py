@@ -168,7 +168,7 @@ def list_command(ctx: typer.Context, as_json: bool = json_option("the runs and t
 
     from twisted.store.rl import RlRun, list_checkpoints
 
-    store = open_db(ctx)
+    store = open_db(ctx, readonly=True)
     with store.session() as session:
         runs = session.scalars(select(RlRun).order_by(RlRun.id)).all()
         checkpoints = list_checkpoints(session)

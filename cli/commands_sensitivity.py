@@ -76,7 +76,7 @@ def sensitivity_plot(
     """Friction plots (one line per scale) for every set/planner evaluated at several scales."""
     from twisted.experiments import write_report
 
-    with open_db(ctx) as store:
+    with open_db(ctx, readonly=True) as store:
         files = write_report(store, out, sets or None)
     if not files.sensitivity:
         fail(

@@ -309,7 +309,7 @@ def models_command(
         return
     if name is not None:
         fail("--name names an imported model: give --import FILE too")
-    store = open_db(ctx, needed_by=None if model_id is None else f"--id {model_id}")
+    store = open_db(ctx, readonly=True, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
         try:
             model = load_model(store, model_id)

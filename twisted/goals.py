@@ -207,7 +207,13 @@ def goal_from_spec(spec: str | Sequence[Any] | PData | Goal) -> Goal:
                 f"goal {shown!r} is neither P-data nor a knot: write a knot as <name>, <name>@<crossings> "
                 "or knot:<name>@<crossings>, e.g. overhand@3"
             )
-        crossings = int(match["crossings"])
+        digits = match["crossings"]
+        if len(digits) > 4:  # int() of 4,300 digits and more raises ValueError; no rope has 10,000 crossings
+            from twisted.knots import MAX_BUILT_CROSSINGS
+
+            shown = digits if len(digits) <= 20 else f"{digits[:12]}... ({len(digits):,} digits)"
+            raise GoalError(f"{shown} crossings: a knot goal has 1 to {MAX_BUILT_CROSSINGS}")
+        crossings = int(digits)
         return knot_goal(match["name"], crossings if crossings > 0 else None)
     try:
         return state_goal(parse_state(spec, "goal"))

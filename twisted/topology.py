@@ -29,6 +29,7 @@ __all__ = [
     "Visit",
     "cross",
     "cross2",
+    "json_int",
     "mirror",
     "parse_p_data",
     "projected_crossings",
@@ -118,6 +119,28 @@ def _quote(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text):,} characters)"
 
 
+# Every integer in P-data fits 64 bits (positions are small); anything larger is refused as such, before
+# Python's own limit on reading integers (4,300 digits) would raise a bare ValueError.
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
+_INT64_DIGITS = 19
+
+
+def _beyond_64_bits(digits: str) -> PDataError:
+    shown = digits if len(digits) <= 40 else f"{digits[:20]}...{digits[-8:]}"
+    return PDataError(
+        f"integer {shown} ({len(digits.lstrip('-')):,} digits) is beyond 64 bits: P-data positions are 1..2n"
+    )
+
+
+def json_int(digits: str) -> int:
+    """``parse_int`` for :func:`json.loads` of P-data and goal files: a 64-bit integer, else PDataError."""
+    if len(digits.lstrip("-")) <= _INT64_DIGITS:
+        value = int(digits)
+        if INT64_MIN <= value <= INT64_MAX:
+            return value
+    raise _beyond_64_bits(digits)
+
+
 def _validate(entries: Sequence[Any]) -> PData:
     if not isinstance(entries, (list, tuple)):
         raise PDataError(
@@ -133,6 +156,8 @@ def _validate(entries: Sequence[Any]) -> PData:
         for name, value in (("position", pos), ("partner", partner)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise PDataError(f"entry {i}: {name} must be an integer, got {_quote(value)}")
+            if not INT64_MIN <= value <= INT64_MAX:  # compared, never printed: repr fails beyond 4,300 digits
+                raise PDataError(f"entry {i}: {name} is beyond 64 bits (P-data positions are 1..2n)")
         if over not in ("O", "U"):
             raise PDataError(f"entry {i}: over/under must be \"O\" or \"U\", got {_quote(over)}")
         if sign not in ("+", "-"):
@@ -171,7 +196,7 @@ def parse_p_data(value: str | Sequence[Any] | PData) -> PData:
         return value
     if isinstance(value, str):
         try:
-            value = json.loads(value)
+            value = json.loads(value, parse_int=json_int)
         except json.JSONDecodeError as exc:
             raise PDataError(
                 f"P-data is not valid JSON ({exc.msg} at column {exc.colno}): {_quote(value)}"

@@ -38,7 +38,7 @@ from twisted.store.experiments import (
     save_problem_set,
 )
 from twisted.store.models import TopologicalState, Transition
-from twisted.topology import PData, PDataError, parse_p_data
+from twisted.topology import PData, PDataError, json_int, parse_p_data
 
 __all__ = [
     "ALL_MADE_SETS",
@@ -47,6 +47,7 @@ __all__ = [
     "FOUR_SET",
     "UNSEEN_SET",
     "EvalInputError",
+    "decode_goal_file",
     "goal_problems",
     "import_problem_sets",
     "make_problem_sets",
@@ -238,6 +239,40 @@ def make_problem_sets_in_store(
         return [r for name in drawn if (r := load_problem_set(session, f"{prefix}{name}")) is not None]
 
 
+def decode_goal_file(data: bytes) -> str:
+    """The text of a goal file, which must be UTF-8 (JSON's encoding; a UTF-8 byte-order mark is allowed).
+
+    Raises :class:`EvalInputError` saying what the bytes are instead: UTF-16/32 (by their byte-order
+    mark), binary (NUL bytes), or where the first byte that is not UTF-8 sits.
+    """
+    for mark, encoding in _BYTE_ORDER_MARKS:
+        if data.startswith(mark):
+            raise EvalInputError(
+                f"goal file is {encoding} text (it starts with a {encoding} byte-order mark); goal files are "
+                "UTF-8 JSON: convert it, e.g. `iconv -f UTF-16 -t UTF-8`"
+            )
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        kind = "binary data, not text" if b"\x00" in data[:4096] else "not UTF-8 text"
+        raise EvalInputError(
+            f"goal file is {kind} (byte 0x{data[exc.start]:02x} at offset {exc.start:,} is not UTF-8); goal "
+            "files are UTF-8 JSON"
+        ) from None
+    if "\x00" in text:
+        raise EvalInputError("goal file holds NUL characters (binary data, not text); goal files are UTF-8")
+    return text
+
+
+# Byte-order marks of the encodings a goal file is not in (UTF-32 first: its mark starts like UTF-16's).
+_BYTE_ORDER_MARKS = (
+    (b"\xff\xfe\x00\x00", "UTF-32"),
+    (b"\x00\x00\xfe\xff", "UTF-32"),
+    (b"\xff\xfe", "UTF-16"),
+    (b"\xfe\xff", "UTF-16"),
+)
+
+
 def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]:
     """Goals from JSON: a list of goals (one set called ``name``) or an object of named lists.
 
@@ -249,7 +284,7 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
     from twisted.goals import GoalError, goal_from_spec
 
     try:
-        data = json.loads(text)
+        data = json.loads(text, parse_int=json_int)
     except json.JSONDecodeError as exc:
         raise EvalInputError(
             f"goal file is not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
@@ -257,6 +292,8 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
     except RecursionError:
         message = "goal file nests lists or objects far too deeply (a goal is a list of lists)"
         raise EvalInputError(message) from None
+    except PDataError as exc:  # an integer beyond 64 bits
+        raise EvalInputError(f"goal file: {exc}") from None
     if isinstance(data, list):
         if not name:
             raise EvalInputError("a goal file holding one list needs a set name (--name)")

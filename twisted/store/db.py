@@ -3,7 +3,9 @@
 ``open_store(url)`` first inspects what is at ``url`` WITHOUT writing to it, and refuses (``StoreError``,
 file untouched) a file that is not an SQLite database, an SQLite/PostgreSQL database holding other
 tables but no twisted migration history, or one whose Alembic revision is unknown to this version
-(a newer schema). Only then does it create the engine and upgrade to the current heads.
+(a newer schema). Before a command writes, it also refuses a file whose ``-wal``/``-shm`` companions
+cannot be written, and (``verify=True``) one whose pages SQLite's ``quick_check`` finds damaged. Only
+then does it create the engine and upgrade to the current heads.
 
 SQLite connections run in WAL mode with a busy timeout, so readers (a ``sqlite3`` shell,
 ``twisted stats``) never block a running collector and several collectors can write the same file;
@@ -101,17 +103,39 @@ class Store:
         return f"Store({self.url.render_as_string(hide_password=True)!r})"
 
 
+# A file name is quoted in messages up to this many characters (a 4,000-character name must not bury the
+# cause); file systems allow at most this many bytes in one name and in a whole path.
+_SHOWN_CHARS = 120
+_NAME_MAX_BYTES = 255
+_PATH_MAX_BYTES = 4095
+
+
+def _shorten(text: str, limit: int = _SHOWN_CHARS) -> str:
+    """``text`` cut to about ``limit`` characters (its start and its end) for a message."""
+    if len(text) <= limit:
+        return text
+    keep = limit // 2 - 10
+    return f"{text[:keep]}...[{len(text) - 2 * keep:,} characters]...{text[-keep:]}"
+
+
 def _display(url: URL) -> str:
-    return url.render_as_string(hide_password=True)
+    return _shorten(url.render_as_string(hide_password=True))
+
+
+def _shown_path(path: Path) -> str:
+    """``path`` quoted for a message: ``repr`` (bytes that are not UTF-8 show as escapes), shortened."""
+    return _shorten(repr(str(path)))
 
 
 def parse_url(url: str | URL) -> URL:
     """Parse a database URL, raising :class:`StoreError` with the accepted forms when it is malformed."""
+    if isinstance(url, str):
+        _check_utf8(url, "database URL")
     try:
         parsed = make_url(url) if isinstance(url, str) else url
     except ArgumentError as exc:
         raise StoreError(
-            f"cannot parse database URL {url!r}: use sqlite:///path/to/file.db or "
+            f"cannot parse database URL {_shorten(repr(url))}: use sqlite:///path/to/file.db or "
             "postgresql+psycopg://user@host/dbname"
         ) from exc
     if parsed.get_backend_name() not in ("sqlite", "postgresql"):
@@ -158,6 +182,86 @@ def _classify(tables: set[str], revisions: list[str] | None, where: str) -> list
     return revisions
 
 
+def _check_utf8(text: str, what: str) -> None:
+    """Refuse ``text`` (from the command line or the environment) that holds bytes which are not UTF-8:
+    Python keeps them as lone surrogates, which SQLite and SQLAlchemy cannot encode."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        char = ord(exc.object[exc.start])
+        byte = f"byte 0x{char - 0xDC00:02x}" if 0xDC80 <= char <= 0xDCFF else f"character U+{char:04X}"
+        raise StoreError(
+            f"{what} {_shorten(repr(text))} is not valid UTF-8 ({byte} at position {exc.start}); SQLite "
+            "takes UTF-8 file names: rename the file or give another --db"
+        ) from None
+
+
+def _check_path_name(path: Path) -> None:
+    """Refuse, before the path is used, a file name SQLite or the file system cannot take."""
+    shown = _shown_path(path)
+    text = str(path)
+    _check_utf8(text, "database file name")
+    encoded = text.encode("utf-8")
+    if "\x00" in text:
+        raise StoreError(f"database file name {shown} holds a NUL character: give another --db")
+    longest = max((len(part.encode()) for part in path.parts), default=0)
+    if longest > _NAME_MAX_BYTES:
+        raise StoreError(
+            f"database file name {shown} has a name of {longest:,} bytes (file systems allow at most "
+            f"{_NAME_MAX_BYTES} per file or folder name): give a shorter --db"
+        )
+    if len(encoded) > _PATH_MAX_BYTES:
+        raise StoreError(
+            f"database file name {shown} is {len(encoded):,} bytes long (at most {_PATH_MAX_BYTES}): give a "
+            "shorter --db"
+        )
+
+
+def _check_companions(path: Path, where: str) -> None:
+    """Refuse a database whose ``-wal`` / ``-shm`` file exists but cannot be written (every write would fail).
+
+    A plain SQLite reader of a read-only copy leaves them read-only (SQLite gives them the database's
+    permissions); making the database writable again does not change them.
+    """
+    companions = [Path(f"{path}{suffix}") for suffix in ("-wal", "-shm")]
+    readonly = [c for c in companions if c.exists() and not os.access(c, os.W_OK)]
+    if readonly:
+        names = " and ".join(_shown_path(c) for c in readonly)
+        raise StoreError(
+            f"{where} cannot be written: {names} beside it {'is' if len(readonly) == 1 else 'are'} read-only "
+            "(left by a program that read a read-only copy?); it was left untouched: make "
+            f"{'it' if len(readonly) == 1 else 'them'} writable (chmod u+w), or delete "
+            f"{'it' if len(readonly) == 1 else 'them'} while no program has the database open"
+        )
+
+
+_CHECK_MMAP_BYTES = 1 << 40  # SQLite caps it at its own limit (2 GB by default)
+
+
+def _quick_check(conn: sqlite3.Connection, where: str) -> None:
+    """Refuse a database whose pages SQLite's ``quick_check`` finds damaged (overwritten, cut short).
+
+    ``quick_check`` walks every page of every table and index, checking the B-tree structure, without
+    comparing indexes with their tables (``integrity_check`` does, at several times the cost).
+    """
+    try:
+        # Read through a memory map: the kernel then reads ahead, and a file not in the page cache is
+        # checked ~10x faster than page by page (1 GB: ~3 s instead of ~33 s, bench/bench_store_check.py).
+        conn.execute(f"PRAGMA mmap_size = {_CHECK_MMAP_BYTES}")
+        # quick_check(1) stops at the first problem; asked for more, SQLite may go on and fail as a whole
+        # ("database disk image is malformed"), losing the page numbers it had found.
+        problems = [str(row[0]) for row in conn.execute("PRAGMA quick_check(1)")]
+    except sqlite3.DatabaseError as exc:
+        problems = [str(exc)]
+    if problems != ["ok"]:
+        lines = (" ".join(p.replace("*** in database main ***", "").split()) for p in problems)
+        found = "; ".join(_shorten(line) for line in lines)
+        raise StoreError(
+            f"{where} is damaged (SQLite's quick_check: {found}); nothing was written to it: restore it from "
+            "a copy (the sqlite3 shell's .recover may salvage what is left)"
+        )
+
+
 def _writable(path: Path) -> bool:
     return os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)
 
@@ -175,10 +279,11 @@ def _readonly_uri(path: Path) -> str:
     return uri
 
 
-def _inspect_sqlite_file(path: Path, where: str, readonly: bool = False) -> list[str]:
+def _inspect_sqlite_file(path: Path, where: str, readonly: bool = False, verify: bool = False) -> list[str]:
     """Read-only look at an existing SQLite file: its Alembic revisions (empty list = a new database).
 
-    Unless ``readonly`` (the caller will only read), a file that cannot be written is refused.
+    Unless ``readonly`` (the caller will only read), a file that cannot be written, or whose companion
+    files cannot, is refused. ``verify``: also refuse a file with damaged pages (:func:`_quick_check`).
     """
     if path.is_dir():
         raise StoreError(f"{where} is a directory, not a database file: give a file path")
@@ -199,6 +304,8 @@ def _inspect_sqlite_file(path: Path, where: str, readonly: bool = False) -> list
             f"{where} is not writable (the file and its directory must be writable: SQLite keeps its "
             "write-ahead log beside the file)"
         )
+    if not readonly:
+        _check_companions(path, where)
     try:
         conn = sqlite3.connect(_readonly_uri(path), uri=True, timeout=30)
     except sqlite3.Error as exc:
@@ -208,21 +315,25 @@ def _inspect_sqlite_file(path: Path, where: str, readonly: bool = False) -> list
         revisions = None
         if "alembic_version" in tables:
             revisions = [row[0] for row in conn.execute("SELECT version_num FROM alembic_version")]
+        found = _classify(tables, revisions, where)
+        if verify:
+            _quick_check(conn, where)
     except sqlite3.DatabaseError as exc:
         raise StoreError(f"{where} is not a readable SQLite database ({exc}); it was left untouched") from exc
     finally:
         conn.close()
-    return _classify(tables, revisions, where)
+    return found
 
 
 def _check_new_sqlite_path(path: Path, where: str) -> None:
     parent = path.parent if str(path.parent) else Path(".")
+    shown = _shown_path(parent)
     if not parent.exists():
-        raise StoreError(f"cannot create {where}: directory {str(parent)!r} does not exist")
+        raise StoreError(f"cannot create {where}: directory {shown} does not exist")
     if not parent.is_dir():
-        raise StoreError(f"cannot create {where}: {str(parent)!r} is not a directory")
+        raise StoreError(f"cannot create {where}: {shown} is not a directory")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise StoreError(f"cannot create {where}: directory {str(parent)!r} is not writable")
+        raise StoreError(f"cannot create {where}: directory {shown} is not writable")
 
 
 def _inspect_connection(conn: Connection, where: str) -> list[str]:
@@ -361,14 +472,25 @@ def _upgrade(engine: Engine, url: URL) -> None:
                 raw.execute("PRAGMA foreign_keys = ON")
 
 
-def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True, readonly: bool = False) -> Store:
+def open_store(
+    url: str | URL,
+    *,
+    create: bool = True,
+    upgrade: bool = True,
+    readonly: bool = False,
+    verify: bool = False,
+) -> Store:
     """Open (creating if new and ``create``) the twisted database at ``url`` and upgrade it to the heads.
 
     ``upgrade=False`` only checks (for Alembic run by hand). ``readonly``: for commands that only read;
     an existing database is opened without writing to it (nor beside it), even a file this process may
-    not write; only a schema older than this twisted's is upgraded first, when that is possible. Raises
-    :class:`StoreError`, leaving whatever is at ``url`` untouched, when the URL is malformed, the path
-    cannot be created or written, the file is not a twisted database, or its schema is newer.
+    not write; only a schema older than this twisted's is upgraded first, when that is possible, and a
+    database that does not exist yet is created when ``create`` (else refused).
+    ``verify``: an existing SQLite file that will be written is first read whole by SQLite's
+    ``quick_check`` (what a command about to write asks; a few seconds per GB, docs/DESIGN.md 11).
+    Raises :class:`StoreError`, leaving whatever is at ``url`` untouched, when the URL is malformed, the
+    path cannot be created or written, the file is not a twisted database, its schema is newer, or
+    (``verify``) its pages are damaged.
     """
     parsed = parse_url(url)
     # A new SQLite file that other processes create and migrate at the same moment (collectors started
@@ -376,7 +498,7 @@ def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True, rea
     # mode change, a hot journal seen read-only): such an open is retried after a short pause.
     for attempt in range(_OPEN_ATTEMPTS):
         try:
-            return _open_store(parsed, create=create and not readonly, upgrade=upgrade, readonly=readonly)
+            return _open_store(parsed, create=create, upgrade=upgrade, readonly=readonly, verify=verify)
         except StoreError as exc:
             retry = sqlite_path(parsed) is not None and "database is locked" in str(exc)
             if not retry or attempt == _OPEN_ATTEMPTS - 1:
@@ -388,16 +510,21 @@ def open_store(url: str | URL, *, create: bool = True, upgrade: bool = True, rea
 _OPEN_ATTEMPTS = 5
 
 
-def _open_store(parsed: URL, *, create: bool, upgrade: bool, readonly: bool = False) -> Store:
+def _open_store(
+    parsed: URL, *, create: bool, upgrade: bool, readonly: bool = False, verify: bool = False
+) -> Store:
     where = f"database {_display(parsed)!r}"
     heads = head_revisions()
     path = sqlite_path(parsed)
     current: list[str] | None = None
     if path is not None:
-        where = f"database file {str(path)!r}"
+        where = f"database file {_shown_path(path)}"
+        _check_path_name(path)
         if path.exists():
-            current = _inspect_sqlite_file(path, where, readonly=readonly)
-            if readonly and set(current) != heads:
+            current = _inspect_sqlite_file(path, where, readonly=readonly, verify=verify and not readonly)
+            if readonly and not current and create:
+                readonly = False  # a new database: made as any command makes it (its tables only)
+            elif readonly and set(current) != heads:
                 if not current:
                     raise StoreError(f"{where} holds no twisted data yet (run `twisted collect` first)")
                 if not _writable(path):
@@ -405,11 +532,13 @@ def _open_store(parsed: URL, *, create: bool, upgrade: bool, readonly: bool = Fa
                         f"{where} has the older schema {', '.join(sorted(current))} and cannot be written "
                         "to upgrade it: make it writable once, or copy it"
                     )
+                _check_companions(path, where)
                 readonly = False  # upgraded below like any command does, then read as usual
         elif not create:
             raise StoreError(f"{where} does not exist (run `twisted collect` first, or check --db)")
         else:
             _check_new_sqlite_path(path, where)
+            readonly = False
     engine = make_engine(parsed, readonly=readonly)
     try:
         if current is None:
