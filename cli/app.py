@@ -7,7 +7,6 @@ import functools
 import inspect
 import logging
 import math
-import os
 import time
 import typing
 from collections.abc import Callable
@@ -47,6 +46,25 @@ def _check_number(value: Any, param: Any, ctx: typer.Context) -> None:
         raise typer.BadParameter(message, ctx=ctx, param=param)
 
 
+# the options that name something (a set, a label, a model): no control characters, no blank ends
+NAME_OPTIONS = ("name", "label", "prefix")
+
+
+def _check_name(value: Any, param: Any, ctx: typer.Context) -> None:
+    from twisted.runtime import name_problem
+
+    if param.name not in NAME_OPTIONS or not isinstance(value, str) or (param.name == "prefix" and not value):
+        return
+    problem = name_problem(value)
+    if problem is not None:
+        raise typer.BadParameter(f"{escape_text(shorten(value))} {problem}", ctx=ctx, param=param)
+
+
+def escape_text(text: str) -> str:
+    """``text`` quoted with its control characters as escapes (safe to print to a terminal)."""
+    return repr(text)
+
+
 def harden(command: Any) -> None:
     """Check every number given to ``command`` and its subcommands: finite floats, 64-bit integers.
 
@@ -63,6 +81,7 @@ def harden(command: Any) -> None:
         ) -> Any:
             out = _process(ctx, value)
             _check_number(out, _param, ctx)
+            _check_name(out, _param, ctx)
             return out
 
         param.process_value = process_checked  # type: ignore[method-assign]
@@ -146,6 +165,11 @@ class AppState:
     db_url: str = DEFAULT_DB
     log_file: Path | None = None
     verbose: bool = False
+    force: bool = False
+
+
+# the global options of the command that runs (what unwritable() checks outputs against)
+_running = AppState()
 
 
 # The global options, defined once: the root callback takes them before the command (``--db`` also
@@ -162,7 +186,7 @@ def _db_option(default: str | None, **extra: Any) -> Any:
 
 
 def _checked_log_file(value: Path | None) -> Path | None:
-    problem = None if value is None else unwritable(value, new_folders=False)
+    problem = None if value is None else unwritable(value, append=True)
     if problem is not None:
         raise typer.BadParameter(problem)
     return value
@@ -180,6 +204,12 @@ def _log_file_option() -> Any:
 
 def _verbose_option() -> Any:
     return typer.Option(False, "--verbose", help="Show the log on the console too, down to DEBUG.")
+
+
+def _force_option() -> Any:
+    return typer.Option(
+        False, "--force", help="Let an output (--out, --export, --picture, ...) write over an existing file."
+    )
 
 
 def _print_version(value: bool) -> None:
@@ -207,11 +237,12 @@ def main(
     db: str = _db_option(DEFAULT_DB, envvar="TWISTED_DB"),
     log_file: Annotated[Path | None, _log_file_option()] = None,
     verbose: bool = _verbose_option(),
+    force: bool = _force_option(),
     version: bool = typer.Option(
         False, "--version", is_eager=True, callback=_print_version, help="Print the version and exit."
     ),
 ) -> None:
-    ctx.obj = AppState(db_url=db, log_file=log_file, verbose=verbose)
+    ctx.obj = AppState(db_url=db, log_file=log_file, verbose=verbose, force=force)
 
 
 def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -225,16 +256,18 @@ def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
         "global_db": (str | None, _db_option(None, show_default=False)),
         "global_log_file": (Annotated[Path | None, _log_file_option()], None),
         "global_verbose": (bool, _verbose_option()),
+        "global_force": (bool, _force_option()),
     }
     if own_ctx is None:
         extra["global_ctx"] = (typer.Context, inspect.Parameter.empty)
 
     @functools.wraps(command)
     def run(*args: Any, **kwargs: Any) -> Any:
-        db, log_file, verbose = (
+        db, log_file, verbose, force = (
             kwargs.pop("global_db"),
             kwargs.pop("global_log_file"),
             kwargs.pop("global_verbose"),
+            kwargs.pop("global_force"),
         )
         ctx = kwargs[own_ctx] if own_ctx is not None else kwargs.pop("global_ctx")
         state = ctx.find_root().obj
@@ -243,6 +276,7 @@ def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:
         state.db_url = db if db is not None else state.db_url
         state.log_file = log_file if log_file is not None else state.log_file
         state.verbose = state.verbose or verbose
+        state.force = state.force or force
         given = {name: v for name, v in kwargs.items() if name != own_ctx}
         return _logged(ctx, state, functools.partial(command, *args, **kwargs), given)
 
@@ -263,6 +297,11 @@ def _logged(ctx: typer.Context, state: AppState, command: Callable[[], Any], giv
     and its end logged."""
     from cli import logs
 
+    global _running
+    _running = state
+    problem = None if state.log_file is None else unwritable(state.log_file, append=True)
+    if problem is not None:  # the database is known now (--db may come after --log-file)
+        fail(f"--log-file {state.log_file}: {problem}")
     logs.configure(err_console, verbose=state.verbose, log_file=state.log_file)
     shown = ", ".join(
         f"{name}={shorten(repr(v.value if isinstance(v, Enum) else v))}" for name, v in given.items()
@@ -353,23 +392,35 @@ def open_db(
         fail(f"{needed_by}: {exc}" if needed_by else str(exc))
 
 
-def unwritable(path: Path, new_folders: bool = True) -> str | None:
-    """Why a file cannot be written at ``path`` (None: it can be); nothing is created. ``new_folders``:
-    missing folders would be created (the nearest existing one must allow it)."""
-    if path.is_dir():
-        return "is a directory; give a file name"
-    folder = path.parent
-    if not new_folders and not folder.is_dir():
-        return f"the folder {folder} does not exist"
-    while not folder.exists():
-        folder = folder.parent
-    if not folder.is_dir():
-        return f"{folder} is not a directory"
-    if not os.access(folder, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        return f"cannot write there (no permission in {folder})"
-    if str(path.resolve()).startswith(("/proc/", "/sys/", "/dev/")):
-        return "not a place for files (a kernel file system); give another path"
-    return None
+def unwritable(path: Path, append: bool = False) -> str | None:
+    """Why a command must not write the file ``path`` (None: it may); nothing is created
+    (:func:`twisted.runtime.output_problem`): never the open database or its -wal/-shm files, nor an
+    existing file without --force (``append``: a log added to), nor in a folder that does not exist."""
+    from twisted.runtime import output_problem
+
+    return output_problem(path, protected=_store_files(_running.db_url), force=_running.force, append=append)
+
+
+def unwritable_folder(path: Path, marker: str) -> str | None:
+    """Why a command must not write its files into the folder ``path``, one that holds ``marker`` being
+    written over only with --force (:func:`twisted.runtime.output_folder_problem`)."""
+    from twisted.runtime import output_folder_problem
+
+    protected = _store_files(_running.db_url)
+    return output_folder_problem(path, marker=marker, protected=protected, force=_running.force)
+
+
+def _store_files(url: str) -> tuple[str, ...]:
+    """The files of the SQLite database at ``url`` (none for PostgreSQL or a malformed URL)."""
+    from twisted.runtime import store_files
+    from twisted.store.db import parse_url, sqlite_path
+
+    try:
+        parsed = parse_url(url)
+    except Exception:  # noqa: BLE001 (malformed: open_db says so)
+        return ()
+    path = sqlite_path(parsed) if parsed.get_backend_name() == "sqlite" else None
+    return store_files(path) if path is not None else ()
 
 
 def shorten(text: str, limit: int = 120) -> str:

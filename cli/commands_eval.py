@@ -202,6 +202,7 @@ def report_command(
     """Success-vs-time curves (PNG, one per set) and a Markdown table from the stored results."""
     from twisted.experiments import write_report
 
+    check_out_folder(out)
     with open_db(ctx, readonly=True) as store:
         files = write_report(store, out, sets or None)
     console.print(f"wrote {files.markdown}")
@@ -209,6 +210,15 @@ def report_command(
         console.print(f"wrote {p}")
     if not files.plots:
         err_console.print("no finished evaluation results yet: run `twisted eval` first")
+
+
+def check_out_folder(out: Path) -> None:
+    """``--out`` of report / sensitivity plot: a folder to write into (exit 2 before anything is opened)."""
+    from cli.app import unwritable_folder
+
+    problem = unwritable_folder(out, "report.md")
+    if problem is not None:
+        fail(f"--out {out}: {problem}")
 
 
 def _figure(x: float | None, fmt: str = ",.0f") -> str:

@@ -15,6 +15,7 @@ from cli.app import (
     subcommands,
 )
 from cli.commands_eval import (
+    check_out_folder,
     default_parallel,
     default_planner,
     given_planner_options,
@@ -76,6 +77,7 @@ def sensitivity_plot(
     """Friction plots (one line per scale) for every set/planner evaluated at several scales."""
     from twisted.experiments import write_report
 
+    check_out_folder(out)
     with open_db(ctx, readonly=True) as store:
         files = write_report(store, out, sets or None)
     if not files.sensitivity:

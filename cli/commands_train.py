@@ -318,7 +318,10 @@ def models_command(
         if model.model_id is None:
             fail("the database holds no model to export: train one with `twisted train`")
         target = Path(export)
-        target.write_bytes(model.to_bytes())
+        try:
+            target.write_bytes(model.to_bytes())
+        except OSError as exc:
+            fail(f"--export {export}: cannot be written ({exc.strerror or exc})")
         console.print(f"model {model.model_id} written to {target} ({target.stat().st_size / 1e6:.1f} MB)")
         return
     models = list_models(store)

@@ -295,3 +295,122 @@ class StopSignals:
         finally:
             for s, h in previous.items():
                 signal.signal(s, h)
+
+
+# ---- output files: what a command may write (docs/security.md) ------------------------------------------
+
+# the files SQLite keeps beside a database: none of them is ever an output
+STORE_SUFFIXES = ("", "-wal", "-shm", "-journal")
+KERNEL_FILE_SYSTEMS = ("/proc", "/sys", "/dev")
+
+
+def store_files(database: str | os.PathLike[str] | None) -> tuple[str, ...]:
+    """The real paths of a SQLite database file and its -wal, -shm and -journal files (None: none)."""
+    if database is None:
+        return ()
+    real = os.path.realpath(database)
+    return tuple(real + suffix for suffix in STORE_SUFFIXES)
+
+
+def _same(a: str, b: str) -> bool:
+    """Whether ``a`` and ``b`` are one file (a hard link too); False when either is missing."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def output_problem(
+    path: str | os.PathLike[str],
+    *,
+    protected: tuple[str, ...] = (),
+    force: bool = False,
+    append: bool = False,
+) -> str | None:
+    """Why a command must not write the file ``path`` (None: it may); nothing is created.
+
+    Refused: a folder; a path below /proc, /sys or /dev; a path whose real location (after symbolic
+    links and ``..``) is one of ``protected`` (the open database and its -wal/-shm/-journal files,
+    :func:`store_files`) whatever ``force`` says; a missing folder (it is not created); a folder or
+    file without write permission; and an existing file unless ``force`` (or ``append``, for a log
+    that is added to, when it is a regular file).
+    """
+    text = os.fspath(path)
+    if not text or "\0" in text:
+        return "is not a file name"
+    real = os.path.realpath(text)
+    if real in protected or (os.path.exists(real) and any(_same(real, p) for p in protected)):
+        return "is the database this command has open (or its -wal/-shm/-journal file): give another path"
+    if any(real == root or real.startswith(root + "/") for root in KERNEL_FILE_SYSTEMS):
+        return "is on a kernel file system (/proc, /sys, /dev), not a place for files: give another path"
+    if os.path.isdir(real):
+        return "is a directory: give a file name"
+    folder = os.path.dirname(real) or "."
+    if not os.path.isdir(folder):
+        shown = os.path.dirname(text) or "."
+        return f"the folder {shown} does not exist (it is not created: make it first)"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"cannot write there (no permission in {os.path.dirname(text) or '.'})"
+    if os.path.lexists(text):
+        if append and os.path.isfile(real):
+            return None if os.access(real, os.W_OK) else "cannot write there (the file is read-only)"
+        if not os.path.isfile(real):
+            return "exists and is not a regular file: give another path"
+        if not force:
+            return "exists: give --force to write over it, or another path"
+        if not os.access(real, os.W_OK):
+            return "cannot write there (the file is read-only)"
+    return None
+
+
+def output_folder_problem(
+    path: str | os.PathLike[str], *, marker: str, protected: tuple[str, ...] = (), force: bool = False
+) -> str | None:
+    """Why a command must not write its files into the folder ``path`` (None: it may); nothing is created.
+
+    The folder may be missing when the folder above it exists (the command makes that one level). One
+    that holds ``marker`` (e.g. ``report.md``) is written over only with ``force``; the open database
+    and its -wal/-shm files are never written (:func:`output_problem` on ``marker``).
+    """
+    text = os.fspath(path)
+    if not text or "\0" in text:
+        return "is not a folder name"
+    real = os.path.realpath(text)
+    if any(real == root or real.startswith(root + "/") for root in KERNEL_FILE_SYSTEMS):
+        return "is on a kernel file system (/proc, /sys, /dev), not a place for files: give another folder"
+    if os.path.lexists(text) and not os.path.isdir(real):
+        return "exists and is not a folder: give a folder"
+    if not os.path.isdir(real):
+        above = os.path.dirname(real) or "."
+        if not os.path.isdir(above):
+            return f"the folder above it, {os.path.dirname(text) or '.'}, does not exist (it is not created)"
+        if not os.access(above, os.W_OK | os.X_OK):
+            return f"cannot create it (no permission in {os.path.dirname(text) or '.'})"
+        return None
+    if not os.access(real, os.W_OK | os.X_OK):
+        return "cannot write there (no permission)"
+    return output_problem(os.path.join(text, marker), protected=protected, force=force)
+
+
+# ---- names: set names, labels, model names (docs/security.md) -------------------------------------------
+
+
+def name_problem(text: str, limit: int = 64) -> str | None:
+    """Why ``text`` cannot name a set, label or model (None: it can).
+
+    Names end up in report.md tables, file names and the terminal: refused are control characters
+    (terminal escapes, newlines, tabs, NUL), other invisible format characters, blanks at either
+    end, an empty or blank name, and more than ``limit`` characters.
+    """
+    import unicodedata
+
+    if not text.strip():
+        return "is empty or blank"
+    if len(text) > limit:
+        return f"has {len(text):,} characters, more than {limit}"
+    bad = next((c for c in text if unicodedata.category(c)[0] in "CZ" and c != " "), None)
+    if bad is not None:
+        return f"holds the control or invisible character U+{ord(bad):04X}: use letters, digits and - _ . /"
+    if text != text.strip():
+        return "starts or ends with a blank"
+    return None

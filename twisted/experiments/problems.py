@@ -28,6 +28,7 @@ from sqlalchemy import func, select
 
 from twisted.goals import Goal, state_goal
 from twisted.moves import parse_state, successors
+from twisted.runtime import name_problem
 from twisted.store.experiments import (
     ProblemRecord,
     ProblemSet,
@@ -299,7 +300,8 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
             raise EvalInputError("a goal file holding one list needs a set name (--name)")
         named = {name: data}
     elif isinstance(data, dict):
-        named = {(f"{name}-{k}" if name else str(k)): v for k, v in data.items()}
+        joint = "" if not name or name.endswith(("-", "_", ".", "/")) else "-"  # --name t- -> t-one
+        named = {(f"{name}{joint}{k}" if name else str(k)): v for k, v in data.items()}
     else:
         raise EvalInputError(
             f"goal file must hold a JSON list of goals or an object of named lists, got {type(data).__name__}"
@@ -309,6 +311,9 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
         if not set_name or len(set_name) > 64:
             shown = set_name if len(set_name) <= 80 else f"{set_name[:80]}... ({len(set_name):,} characters)"
             raise EvalInputError(f"set name {shown!r} must have 1 to 64 characters")
+        problem = name_problem(set_name)
+        if problem is not None:  # it is printed, written to report.md and to file names
+            raise EvalInputError(f"set name {set_name!r} {problem}")
         if not isinstance(goals, list) or not goals:
             raise EvalInputError(f"set {set_name!r}: expected a non-empty list of goals (P-data or knots)")
         seen: dict[str, int] = {}

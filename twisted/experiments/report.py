@@ -143,7 +143,14 @@ def _plot_curves(
 
 
 def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    """``name`` as a file name part: letters, digits, - _ . kept; a name that needed changing gets a
+    short hash of itself, so that names that differ (``a/b``, ``a_b``) never share a file."""
+    import hashlib
+
+    kept = "".join(c if (c.isascii() and c.isalnum()) or c in "-_." else "_" for c in name)
+    if kept == name and not name.startswith("."):
+        return name
+    return f"{kept.lstrip('.') or 'x'}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
 
 
 @dataclass

@@ -14,7 +14,6 @@ Each search logs (``logging``, logger ``twisted.planner.session``) its start, ea
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -102,18 +101,9 @@ def curve_sampler(
 
 
 def not_finite(model: Any) -> str | None:
-    """What is not finite in an inverse model (weights, stored losses), in words; None when all is."""
-    import torch
-
-    for name, values in model.net.state_dict().items():
-        if torch.is_floating_point(values) and not bool(torch.isfinite(values).all()):
-            return f"its weights {name} hold NaN or infinity"
-    metrics = model.metadata.get("metrics", {}) or {}
-    for name in ("val_loss", "train_loss"):
-        value = metrics.get(name)
-        if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value)):
-            return f"its {name.replace('_', ' ')} is {value}"
-    return None
+    """What makes an inverse model unable to plan (NaN or infinite weights or stored losses, a forward
+    pass that is not finite: :meth:`InverseModel.unusable`), in words; None when it can."""
+    return model.unusable()  # type: ignore[no-any-return]
 
 
 def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
