@@ -40,10 +40,13 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -105,14 +108,20 @@ def ray_cluster(address: str | None = None, *, num_cpus: int | None = None) -> I
     ):
         # Ray (>= 2.5x) enables token authentication by itself for "auto" but not for an explicit
         # address: without this, `--ray HEAD:6379` is refused by a cluster that `ray start` secured.
+        # A token left here by an earlier `ray start` must not be sent to a cluster without tokens,
+        # though: the driver connects, and every worker dies at once without saying why.
+        if cluster_uses_tokens(address) is False:
+            raise DistributedError(token_mismatch_message(address))
         os.environ["RAY_AUTH_MODE"] = "token"
-    if address in (None, "local"):
+    starts_here = address == "local" or (address is None and _starts_a_local_cluster())
+    if starts_here:
         # Only a cluster we start takes these (connecting to one with them is an error in Ray).
-        kwargs["include_dashboard"] = False
+        kwargs.update(include_dashboard=False, dashboard_host=LOOPBACK, _node_ip_address=LOOPBACK)
         if address == "local" and num_cpus is not None:
             kwargs["num_cpus"] = num_cpus
     try:
-        ray.init(address=address, **kwargs)
+        with _loopback_node(ray) if starts_here else _nothing():
+            ray.init(address=address, **kwargs)
     except (ConnectionError, ValueError, RuntimeError) as exc:
         where = "an existing Ray cluster" if address in (None, "auto") else f"the Ray cluster at {address!r}"
         raise DistributedError(
@@ -131,7 +140,120 @@ def _auth_token_available() -> bool:
     """Whether a Ray authentication token is at hand (environment or ~/.ray/auth_token)."""
     if os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH"):
         return True
-    return os.path.exists(os.path.join(os.path.expanduser("~"), ".ray", "auth_token"))
+    return os.path.exists(RAY_TOKEN_FILE.expanduser())
+
+
+# Where Ray keeps the token that `ray start`, `ray get-auth-token --generate` and every new local cluster
+# (ray.init without an address) write when none exists: ray._private.authentication
+# .authentication_token_setup._get_default_token_path() (Ray 2.5x), Path.home() / ".ray" / "auth_token".
+RAY_TOKEN_FILE = Path("~/.ray/auth_token")
+# Asks the cluster's GCS for a key without sending a token (RAY_AUTH_MODE=disabled in its environment):
+# a cluster that uses tokens refuses with AuthenticationError, one that does not answers.
+_TOKEN_PROBE = """
+import sys
+from ray._raylet import GcsClient
+from ray.exceptions import AuthenticationError
+try:
+    GcsClient(address=sys.argv[1]).internal_kv_get(b"twisted-probe", namespace=None, timeout=10)
+except AuthenticationError:
+    print("token")
+except Exception:
+    print("unknown")
+else:
+    print("none")
+"""
+PROBE_TIMEOUT_S = 30.0
+
+
+def cluster_uses_tokens(address: str) -> bool | None:
+    """Whether the Ray cluster at ``host:port`` asks for a token; None when that cannot be told (a Ray
+    Client address ``ray://``, a host that does not answer, an older Ray)."""
+    if "://" in address:
+        return None
+    host, _, port = address.rpartition(":")
+    if not port.isdigit():
+        return None
+    try:  # a quick look first: Ray's client waits ~40 s for a host that does not answer
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=3).close()
+    except (OSError, ValueError):
+        return None
+    env = {k: v for k, v in os.environ.items() if k not in ("RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH")}
+    env.update(RAY_AUTH_MODE="disabled", RAY_py_gcs_connect_timeout_s="5")
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _TOKEN_PROBE, address],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT_S,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    answer = done.stdout.strip().splitlines()[-1:] or ["unknown"]
+    return {"token": True, "none": False}.get(answer[0])
+
+
+def token_mismatch_message(address: str) -> str:
+    """What to do when a token is at hand here but the cluster at ``address`` uses none."""
+    where = (
+        "RAY_AUTH_TOKEN / RAY_AUTH_TOKEN_PATH"
+        if os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH")
+        else f"{RAY_TOKEN_FILE.expanduser()} (written by an earlier `ray start` or local Ray cluster)"
+    )
+    return (
+        f"the Ray cluster at {address!r} does not use token authentication, but a Ray token is set here "
+        f"({where}); with it every worker would die at once. Either start the cluster with tokens "
+        "(RAY_AUTH_MODE=token on every `ray start`, with this token), or run this command with "
+        "RAY_AUTH_MODE=disabled, or move the token away. A cluster without tokens runs code for anyone "
+        "who reaches its ports: keep it on a private network (docs/distributed.md)"
+    )
+
+
+# A local cluster started by twisted serves this machine only: its node address is the loopback one.
+LOOPBACK = "127.0.0.1"
+# Ray (Linux) replaces a loopback node address by the machine's network address unless it is told that
+# clusters are off (the flag it sets itself on Windows and macOS); the processes of a node whose address
+# is 127.0.0.1 then listen on 127.0.0.1 only (GCS, raylet, workers, agents).
+_NO_CLUSTER_FLAG = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+@contextmanager
+def _loopback_node(ray: Any) -> Iterator[None]:
+    """While ``ray.init`` starts a local cluster: its node address is 127.0.0.1 (Ray's own processes
+    started meanwhile inherit the flag)."""
+    constants: Any = getattr(getattr(ray, "_private", None), "ray_constants", None)
+    saved_flag = getattr(constants, "ENABLE_RAY_CLUSTER", None)
+    saved_env = os.environ.get(_NO_CLUSTER_FLAG)
+    os.environ[_NO_CLUSTER_FLAG] = "0"
+    if saved_flag is not None:
+        constants.ENABLE_RAY_CLUSTER = False  # read at import; get_node_ip_address() reads it per call
+    try:
+        yield
+    finally:
+        if saved_flag is not None:
+            constants.ENABLE_RAY_CLUSTER = saved_flag
+        if saved_env is None:
+            os.environ.pop(_NO_CLUSTER_FLAG, None)
+        else:
+            os.environ[_NO_CLUSTER_FLAG] = saved_env
+
+
+@contextmanager
+def _nothing() -> Iterator[None]:
+    yield
+
+
+def _starts_a_local_cluster() -> bool:
+    """Whether ``ray.init()`` without an address starts a new cluster here (no RAY_ADDRESS, no cluster of
+    `ray start` on this machine) rather than joining one."""
+    try:
+        from ray._private.services import canonicalize_bootstrap_address
+    except ImportError:
+        return False
+    try:
+        return canonicalize_bootstrap_address(None) is None  # type: ignore[arg-type]
+    except Exception:  # noqa: BLE001 - Ray's own lookup failed: let ray.init decide and report
+        return False
 
 
 def cluster_cpus(ray: Any) -> int:
