@@ -64,6 +64,12 @@ def collect_command(
         "--across-share",
         help="Share of curves aimed across another strand (the rest uniform; 0: all uniform).",
     ),
+    remove_share: float = typer.Option(
+        0.0,
+        "--remove-share",
+        help="Also keep a transition that removes crossings, with this probability (0: only those that "
+        "add crossings, the paper's D_Q); see docs/untie.md.",
+    ),
     use_ray: bool = typer.Option(
         False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
     ),
@@ -100,6 +106,7 @@ def collect_command(
         max_tries=max_tries,
         friction_scale=friction_scale,
         across_share=across_share,
+        remove_share=remove_share,
     )
     try:
         options.validate()

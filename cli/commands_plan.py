@@ -75,6 +75,20 @@ def plan_command(
     start_config: int | None = typer.Option(
         None, "--start-config", help="Start from this configurations.id instead of the straight rope."
     ),
+    from_run: int | None = typer.Option(
+        None,
+        "--from-run",
+        help="Start from where solved run RUN_ID ended (its goal node); the search may remove crossings.",
+    ),
+    both_ways: bool = typer.Option(
+        False,
+        "--both-ways",
+        help="Plan with moves that remove crossings too (implied by --from-run, by --goal '[]' and "
+        "wherever adding moves alone cannot reach the goal; see docs/untie.md).",
+    ),
+    removal_curves: str | None = typer.Option(
+        None, "--removal-curves", help="Curves of a removing step: random (default) | model."
+    ),
     resume_run_id: int | None = typer.Argument(
         None, metavar="RUN_ID", help="With --resume: the run to continue.", show_default=False
     ),
@@ -116,6 +130,9 @@ def plan_command(
         model_id=model_id,
         workers=workers,
         as_json=as_json,
+        from_run=from_run,
+        both_ways=both_ways,
+        removal_curves=removal_curves,
         search_options=search_options,  # the planner options (twisted.planner.options), None: not given
     )
     _check(request)
@@ -173,9 +190,11 @@ def _check(request: _Request) -> None:
             "NAME (e.g. overhand); or continue a stopped run with --resume [RUN_ID]"
         )
     from twisted.planner import PlanInputError, check_request
+    from twisted.planner.untie import check_start
 
     try:
         check_request(request.search_options, resume=request.resume, start_config=request.start_config)
+        check_start(request.resume, request.start_config, request.from_run, request.removal_curves)
     except PlanInputError as exc:
         fail(str(exc))
 
@@ -273,6 +292,9 @@ class _Request:
     workers: int
     search_options: dict[str, Any]
     as_json: bool = False
+    from_run: int | None = None  # start where this solved run ended (twisted.planner.untie)
+    both_ways: bool = False
+    removal_curves: str | None = None
 
 
 @dataclass
@@ -287,6 +309,7 @@ class _Setup:
     sampler: Any
     model_id: int | None
     pool: Any
+    request: _Request | None = None
 
 
 def _set_up(
@@ -301,15 +324,16 @@ def _set_up(
     Enumerating a knot's states and starting the workers stop at once at a signal or the deadline; the
     checks in between (database, run, model) finish first, so that a bad input is reported as such.
     """
-    from twisted.goals import make_goal
     from twisted.planner import PlanInputError, curve_sampler
+    from twisted.planner.untie import make_any_goal
     from twisted.sim.pool import SimPool
 
     goal_p = None
     if request.goal is not None or request.knot is not None or request.crossings is not None:
         step("enumerating the knot's states" if request.knot is not None else "checking the goal")
         try:
-            goal_p = make_goal(request.goal, request.knot, request.crossings)
+            other_start = request.from_run is not None or request.start_config is not None
+            goal_p = make_any_goal(request.goal, request.knot, request.crossings, other_start=other_start)
         except PlanInputError as exc:
             fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
     step("opening the database")
@@ -324,7 +348,7 @@ def _set_up(
     _print_model(sampler, used_model_id, request.as_json)
     step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
     pool = resources.enter_context(SimPool(request.workers))
-    return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool)
+    return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool, request)
 
 
 def _needs_stored(request: _Request) -> str | None:
@@ -336,6 +360,8 @@ def _needs_stored(request: _Request) -> str | None:
         return f"--model {request.model_id}"
     if request.start_config is not None:
         return f"--start-config {request.start_config}"
+    if request.from_run is not None:
+        return f"--from-run {request.from_run}"
     return None
 
 
@@ -390,9 +416,21 @@ def _begin(setup: _Setup, stop: Any) -> Any:
             start_configuration_id=setup.start_config,
             stop=stop,
             extra_parameters={"model_id": setup.model_id},
+            **_both_ways(setup.request),
         )
     except PlanInputError as exc:
         fail(str(exc))
+
+
+def _both_ways(request: _Request | None) -> dict[str, Any]:
+    """The start_search arguments of a search that may remove crossings (twisted.planner.untie)."""
+    if request is None:
+        return {}
+    return {
+        "from_run": request.from_run,
+        "both_ways": request.both_ways,
+        "removal_curves": request.removal_curves,
+    }
 
 
 def _model_json(sampler: Any) -> dict[str, Any]:

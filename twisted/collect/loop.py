@@ -217,6 +217,10 @@ class CollectLoop:
             p_data = self.sim.p_data() if outcome.ok else None
             sim_seconds += time.perf_counter() - t0
             rises = p_data is not None and cross < p_data.cross <= options.max_cross
+            # one that removes crossings is kept with probability remove_share (no draw at 0, so a
+            # collection without it draws what it always drew); labelled by the state reached alike
+            if options.remove_share > 0.0 and p_data is not None and p_data.cross < cross:
+                rises = bool(rng.random() < options.remove_share)
             if rises and budget is not None and not budget.claim_kept():
                 more = False  # the run has its max_kept transitions: this curve is not part of it
                 break

@@ -33,6 +33,8 @@ class CollectOptions:
     refresh_seconds: float = 2.0
     # share of curves aimed across another strand (twisted.proposals); the rest are uniform
     across_share: float = ACROSS_SHARE
+    # probability of keeping a transition that removes crossings (0: only rising ones, the paper's D_Q)
+    remove_share: float = 0.0
 
     def validate(self) -> None:
         """Raise :class:`CollectError` naming the first bad option."""
@@ -57,6 +59,8 @@ class CollectOptions:
             raise CollectError(f"--cross-bias must be between 0 and 10, got {self.cross_bias!r}")
         if not (math.isfinite(self.across_share) and 0 <= self.across_share <= 1):
             raise CollectError(f"--across-share must be between 0 and 1, got {self.across_share!r}")
+        if not (math.isfinite(self.remove_share) and 0 <= self.remove_share <= 1):
+            raise CollectError(f"--remove-share must be between 0 and 1, got {self.remove_share!r}")
         positive("max_kept", self.max_kept, allow_none=True)
         positive("max_tries", self.max_tries, allow_none=True)
         if not 1 <= self.max_cross <= 20:

@@ -106,17 +106,18 @@ def not_finite(model: Any) -> str | None:
     return model.unusable()  # type: ignore[no-any-return]
 
 
-def high_level(store: Any, goal: Goal, limit: int) -> Callable[[PData], list[Any]]:
+def high_level(store: Any, goal: Goal, limit: int, both_ways: bool = False) -> Callable[[PData], list[Any]]:
     """``s -> plans(s, goal)``, shortest first, through the store's plan cache.
 
     For a goal of several states (a knot) the plans lead to any member (one BFS over all of them).
+    ``both_ways``: plans with removing moves too (:func:`twisted.moves.plans_both_ways`).
     """
     from twisted.store.plans import cached_plans
 
     target: Goal | PData = goal.states[0] if len(goal.states) == 1 else goal
 
     def plans_from(start: PData) -> list[Any]:
-        return list(cached_plans(store, start, target, limit))
+        return list(cached_plans(store, start, target, limit, both_ways=both_ways))
 
     return plans_from
 
@@ -312,16 +313,29 @@ def start_search(
     stop: StopSignals | None = None,
     progress: Callable[[Twisted], None] | None = None,
     extra_parameters: dict[str, Any] | None = None,
+    from_run: int | None = None,
+    both_ways: bool = False,
+    removal_curves: str | None = None,
 ) -> Twisted:
-    """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope or a stored configuration.
+    """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope, a stored configuration
+    or the end configuration of stored run ``from_run``.
 
-    ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id).
+    ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id). The
+    search also removes crossings (:class:`twisted.planner.untie.BothWays`, its removing steps' curves
+    from ``removal_curves``) when ``both_ways``, when it starts from a run's end, or when adding moves
+    alone cannot reach the goal from the start.
     """
+    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, BothWays, both_ways_needed, run_end
     from twisted.store.search import SearchRun
 
     options.validate()
     goal = goal if isinstance(goal, Goal) else state_goal(goal)
-    if start_configuration_id is None:
+    if from_run is not None:
+        from twisted.topology import top
+
+        end = run_end(store, from_run)
+        root = _root(end.q, end.points, top(end.points))
+    elif start_configuration_id is None:
         root = _root(*straight_rope())
     else:
         from sqlalchemy.exc import NoResultFound
@@ -344,15 +358,22 @@ def start_search(
     rng = np.random.default_rng(options.seed)
     first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
     parameters = {**options.to_dict(), **(extra_parameters or {})}
+    both_ways = both_ways or from_run is not None or both_ways_needed(root.p_data, goal)
+    if both_ways:
+        removal_curves = removal_curves or DEFAULT_REMOVAL_CURVES
+        parameters.update(both_ways=True, removal_curves=removal_curves, from_run=from_run)
     recorder = _Logged(SearchRun.create(store, goal, parameters, root, first, start_configuration_id))
     start = "straight rope" if start_configuration_id is None else f"configuration {start_configuration_id}"
+    start = start if from_run is None else f"end of run {from_run}"
     _log_start(f"new search from the {start}", recorder.run_id, goal, options, parameters.get("model_id"))
-    return Twisted(
+    extra: dict[str, Any] = {"removal_curves": removal_curves} if both_ways else {}
+    return (BothWays if both_ways else Twisted)(
         goal,
         tree,
         options,
         pool,
-        high_level(store, goal, options.plan_limit),
+        high_level(store, goal, options.plan_limit, both_ways),
+        **extra,
         parts=search_parts(options, goal, sampler, recorder),
         recorder=recorder,
         run_id=recorder.run_id,
@@ -420,12 +441,16 @@ def resume_search(
     recorder = _Logged(SearchRun(store, run_id, node_ids))
     resumed = f"resumed at iteration {checkpoint.iteration} ({checkpoint.elapsed_s:.1f} s searched)"
     _log_start(resumed, run_id, info.goal, options, info.parameters.get("model_id"))
-    return Twisted(
+    from twisted.planner.untie import search_class
+
+    cls, extra = search_class(info.parameters)
+    return cls(
         info.goal,
         tree,
         options,
         pool,
-        high_level(store, info.goal, options.plan_limit),
+        high_level(store, info.goal, options.plan_limit, bool(extra)),
+        **extra,
         parts=search_parts(options, info.goal, sampler, recorder),
         recorder=recorder,
         checkpoint=checkpoint,

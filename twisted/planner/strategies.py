@@ -124,7 +124,7 @@ class R1Room:
         rooms = []
         for plan in search.plans[s]:
             move = plan.moves[0]
-            if move.kind != "R1":
+            if move.kind != "R1" or move.remove:
                 rooms.append(1.0)
                 continue
             if move.segment not in best:
@@ -268,7 +268,7 @@ class RetryWeightedNodes:
         indices = search.tree.by_state[s]
         pairs, key = search.stats["pair"], next_state.key
         weights = [self.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
-        if self.room is not None and move is not None and move.kind == "R1":
+        if self.room is not None and move is not None and move.kind == "R1" and not move.remove:
             nodes, room = search.tree.nodes, self.room
             weights = [
                 w * room.node_weight(nodes[i], move.segment) for w, i in zip(weights, indices, strict=True)

@@ -1,0 +1,175 @@
+"""Untie and retie: searches from any stored rope to any goal, the straight rope ``[]`` included.
+
+A search *both ways* (:class:`BothWays`) differs from Algorithm 1 in three places, all small:
+
+- its high level plans with adding and removing moves (:func:`twisted.moves.plans_both_ways`, through
+  the plan cache under a key of its own), so a state with more crossings than the goal, or with a
+  crossing the goal lacks, has plans too;
+- a result enters ``T`` whenever it has no more crossings than the start or the goal, whichever has
+  more (the paper's rule "Cross does not drop" would forbid every untying step);
+- the curves of a removing step come from the proposer ``removal_curves`` names: ``model`` (the
+  inverse model, conditioned on the removing move, which it encodes apart from the adding one; the
+  shipped model has never seen one) or ``random`` (uniform random curves, the ``random-low``
+  baseline's). Adding steps are served as in any search.
+
+Where a search starts: the straight rope, a stored configuration (``--start-config``), or the end
+configuration of a stored run (:func:`run_end`: the goal node of a solved run), which ``twisted untie``
+and ``twisted plan --from-run`` use. What a both-ways run asked for is stored with its parameters
+(:data:`PARAMETERS`), so a resumed run continues both ways with the same proposer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from twisted.goals import Goal, PlanInputError, make_goal, state_goal
+from twisted.moves import sub_states
+from twisted.planner.search import Twisted
+from twisted.topology import EMPTY, PData, parse_p_data
+
+__all__ = [
+    "PARAMETERS",
+    "REMOVAL_CURVES",
+    "BothWays",
+    "RunEnd",
+    "both_ways_needed",
+    "check_start",
+    "make_any_goal",
+    "run_end",
+    "search_class",
+]
+
+# proposers of a removing step's curves (see the module docstring)
+REMOVAL_CURVES = ("model", "random")
+DEFAULT_REMOVAL_CURVES = "random"
+# runs.parameters keys of a both-ways search (beside the planner options and the model id)
+PARAMETERS = ("both_ways", "removal_curves", "from_run")
+
+
+class BothWays(Twisted):
+    """Algorithm 1 with adding and removing moves (see the module docstring).
+
+    ``removal_curves``: ``model`` or ``random``, the proposer of a removing step's K curves.
+    The high level given must plan both ways (:func:`twisted.planner.session.high_level` with
+    ``both_ways=True``).
+    """
+
+    def __init__(
+        self,
+        goal: Goal | PData,
+        tree: Any,
+        *args: Any,
+        removal_curves: str = DEFAULT_REMOVAL_CURVES,
+        **kwargs: Any,
+    ) -> None:
+        if removal_curves not in REMOVAL_CURVES:
+            raise ValueError(
+                f"removal_curves must be one of {', '.join(REMOVAL_CURVES)}, got {removal_curves!r}"
+            )
+        self.removal_curves = removal_curves
+        goal = goal if isinstance(goal, Goal) else state_goal(goal)
+        if len(tree) == 0:
+            raise ValueError("the tree needs its root (the initial configuration)")
+        # every state on a plan has at most this many crossings (twisted.moves.plans_both_ways)
+        self.cross_cap = max(tree.nodes[0].p_data.cross, goal.cross)
+        super().__init__(goal, tree, *args, **kwargs)
+
+    def keeps(self, parent: PData, p_data: PData) -> bool:
+        return p_data.cross <= self.cross_cap
+
+    def wants_plans(self, p_data: PData) -> bool:
+        return p_data not in self.goal
+
+    def step_curves(self, node: Any, next_state: PData, move: Any) -> tuple[list[Any], int]:
+        if move is not None and move.remove and self.removal_curves == "random":
+            return self.random_curves.sample(node, None, None, self.options.k, self.rng), 0
+        return super().step_curves(node, next_state, move)
+
+
+def search_class(parameters: Mapping[str, Any]) -> tuple[type[Twisted], dict[str, Any]]:
+    """The search class of a run's stored parameters and the keyword arguments it takes beyond
+    :class:`Twisted`'s (a run stored before removing moves existed searches adding only)."""
+    if parameters.get("both_ways"):
+        return BothWays, {"removal_curves": parameters.get("removal_curves", DEFAULT_REMOVAL_CURVES)}
+    return Twisted, {}
+
+
+def both_ways_needed(start: PData, goal: Goal) -> bool:
+    """Whether a search from ``start`` needs removing moves: the goal has no more crossings, or
+    ``start`` has a crossing no goal state has (it is no sub-state of any), so adding moves alone
+    never lead there."""
+    if all(g.cross <= start.cross for g in goal.states):
+        return True
+    return not any(start in sub_states(g) for g in goal.states if g.cross > start.cross)
+
+
+def make_any_goal(
+    goal: str | None, knot: str | None = None, crossings: int | None = None, *, other_start: bool = False
+) -> Goal:
+    """:func:`twisted.goals.make_goal`, and with ``other_start`` (a search that does not start from
+    the straight rope) the straight rope ``[]`` as well: the goal of untying."""
+    if (
+        other_start
+        and goal is not None
+        and knot is None
+        and crossings is None
+        and goal.strip().startswith("[")
+    ):
+        try:
+            parsed = parse_p_data(goal)
+        except ValueError:
+            parsed = None
+        if parsed == EMPTY:
+            return state_goal(EMPTY)
+    return make_goal(goal, knot, crossings)
+
+
+class RunEnd:
+    """Where a stored run ended: its goal node's configuration (``q``, link points, state)."""
+
+    def __init__(self, run_id: int, node_seq: int, q: np.ndarray, points: np.ndarray, p_data: PData) -> None:
+        self.run_id = run_id
+        self.node_seq = node_seq
+        self.q = q
+        self.points = points
+        self.p_data = p_data
+
+
+def run_end(store: Any, run_id: int) -> RunEnd:
+    """The end configuration of stored planner run ``run_id``: the node that solved it.
+
+    Raises :class:`PlanInputError` when there is no such run or it did not reach its goal.
+    """
+    from twisted.store.search import load_run, solution_path
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"run {run_id} is not a planner run in this database (see `twisted runs`)")
+    path = solution_path(store, run_id)
+    if not path:
+        raise PlanInputError(
+            f"run {run_id} did not reach its goal (outcome: {info.outcome}): it has no end configuration "
+            "to start from; give a solved run"
+        )
+    end = path[-1]
+    return RunEnd(run_id, end.seq, np.asarray(end.q), np.asarray(end.points), end.p_data)
+
+
+def check_start(
+    resume: bool, start_config: int | None, from_run: int | None, removal_curves: str | None
+) -> None:
+    """What can be checked of a search's start without the store (PlanInputError when it is wrong)."""
+    if from_run is not None and start_config is not None:
+        raise PlanInputError("give one start: --start-config ID or --from-run RUN_ID, not both")
+    if from_run is not None and resume:
+        raise PlanInputError("--from-run cannot change the start of a resumed run")
+    if removal_curves is not None:
+        if removal_curves not in REMOVAL_CURVES:
+            raise PlanInputError(
+                f"--removal-curves must be one of {', '.join(REMOVAL_CURVES)}, got {removal_curves!r}"
+            )
+        if resume:
+            raise PlanInputError("--removal-curves cannot change a resumed run (it keeps its own)")
