@@ -505,3 +505,18 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
     assert old.exit_code == 2, old.output
     shown = f"retry_weight unrecorded (the default of its day) (now {PlannerOptions().retry_weight})"
     assert shown in " ".join(old.output.split())
+
+    # results made with an option since removed (--state-prior 50) are not reused by any new evaluation;
+    # those that stored its neutral value (0) are
+    x_k2 = [*args, "--label", "x-k2", *variant]
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x-k2")):
+            run.parameters = {**run.parameters, "state_prior": 0.0}
+    assert runner.invoke(app, x_k2).exit_code == 0
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        for run in session.scalars(select(EvalRun).where(EvalRun.planner == "x-k2")):
+            run.parameters = {**run.parameters, "state_prior": 50.0}
+    removed = runner.invoke(app, x_k2)
+    assert removed.exit_code == 2 and "state_prior 50.0 (--state-prior was removed" in " ".join(
+        removed.output.split()
+    ), removed.output
