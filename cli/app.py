@@ -65,6 +65,16 @@ def escape_text(text: str) -> str:
     return repr(text)
 
 
+def _check_given_number(value: Any, param: Any, ctx: typer.Context) -> None:
+    """A value that the parser refused (e.g. out of range) but that is NaN or infinite: say that."""
+    try:
+        number = float(value) if isinstance(value, str) else None
+    except ValueError:
+        return
+    if number is not None and not math.isfinite(number):
+        raise typer.BadParameter(f"{value} is not a finite number", ctx=ctx, param=param)
+
+
 def harden(command: Any) -> None:
     """Check every number given to ``command`` and its subcommands: finite floats, 64-bit integers.
 
@@ -79,7 +89,11 @@ def harden(command: Any) -> None:
         def process_checked(
             ctx: typer.Context, value: Any, _process: Any = process, _param: Any = param
         ) -> Any:
-            out = _process(ctx, value)
+            try:
+                out = _process(ctx, value)
+            except typer.BadParameter:
+                _check_given_number(value, _param, ctx)  # NaN given: say so, not "must be >= 0"
+                raise
             _check_number(out, _param, ctx)
             _check_name(out, _param, ctx)
             return out

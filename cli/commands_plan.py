@@ -264,7 +264,13 @@ def _search(
 
         search.progress = progress
         bar.update(task, description=f"run {search.run_id}")
-        result = search.run(timeout_s=timeout_s, max_iterations=max_iterations)
+        try:
+            result = search.run(timeout_s=timeout_s, max_iterations=max_iterations)
+        except Exception as exc:  # a run that dies is marked failed with the reason, not left running
+            from twisted.store.search import mark_failed
+
+            mark_failed(setup.store, search.run_id, f"{type(exc).__name__}: {exc}")
+            raise
     return search, result, setup_s, stop.exit_code
 
 

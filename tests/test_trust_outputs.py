@@ -216,3 +216,49 @@ def test_a_prefix_ending_in_a_dash_gets_no_second_one(tmp_path: Path) -> None:
     result = runner.invoke(app, ["--db", f"sqlite:///{db}", "problems", "import", str(goals), "--name", "t-"])
     assert result.exit_code == 0, result.output
     assert "t-one" in said(result) and "t--one" not in said(result)
+
+
+# ---- item 14: the small ones ---------------------------------------------------------------------------
+
+
+def test_nan_is_called_not_finite_rather_than_out_of_range(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["--db", f"sqlite:///{tmp_path / 'n.db'}", "train", "--lr", "nan"])
+    assert result.exit_code == 2 and "not a finite number" in said(result) and ">=" not in said(result)
+
+
+def test_an_empty_goal_object_is_refused(tmp_path: Path) -> None:
+    db = tmp_path / "s.db"
+    open_store(f"sqlite:///{db}").close()
+    goals = tmp_path / "g.json"
+    goals.write_text("{}")
+    result = runner.invoke(app, ["--db", f"sqlite:///{db}", "problems", "import", str(goals)])
+    assert result.exit_code == 2 and "empty" in said(result)
+
+
+def test_a_missing_psycopg_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    from twisted.store import StoreError
+
+    monkeypatch.setitem(sys.modules, "psycopg", None)  # as if it were not installed
+    with pytest.raises(StoreError, match=r"twisted-knots\[distributed\]"):
+        open_store("postgresql+psycopg://user@127.0.0.1:1/none")
+
+
+def test_a_failed_training_run_keeps_no_checkpoint(tmp_path: Path) -> None:
+    from twisted.model.config import TrainConfig
+    from twisted.store.training import Checkpoint, TrainingRun, mark_training_failed
+
+    with open_store(f"sqlite:///{tmp_path / 't.db'}") as store:
+        with store.session(write=True) as session:
+            run = TrainingRun(seed=0, parameters=TrainConfig().to_dict(), max_transition_id=0, metrics={})
+            session.add(run)
+            session.flush()
+            session.add(
+                Checkpoint(training_run_id=run.id, epoch=1, batch_index=0, elapsed_s=1.0, payload=b"nan")
+            )
+            run_id = run.id
+        mark_training_failed(store, run_id, "validation loss is nan")
+        with store.session() as session:
+            assert session.get(TrainingRun, run_id).status == "failed"
+            assert session.query(Checkpoint).filter(Checkpoint.training_run_id == run_id).count() == 0

@@ -351,3 +351,21 @@ def test_planner_checkpoint_and_nodes_hold_no_code(db: Path, tmp_path: Path) -> 
     )
     assert not marker.exists()
     assert result.exit_code == 2 and "damaged" in result.output, result.output
+
+
+def test_a_plan_run_that_dies_is_marked_failed_with_the_reason(db: Path) -> None:
+    """Item 4: a search that dies of an exception is not left ``running`` (nor resumable as such)."""
+    url = f"sqlite:///{db}"
+    args = ["plan", "--goal", ONE, "--planner", "random-low", "--max-iterations", "1", "--workers", "1"]
+    result = runner.invoke(app, ["--db", url, *args, "--json"])
+    assert result.exit_code in (0, 3), result.output
+    run_id = json.loads(result.output)["run_id"]
+    conn = sqlite3.connect(db)
+    # stored states of the wrong length (a multiple of 8 bytes, so they read back): the simulator refuses them
+    conn.execute("update search_nodes set q = ? where run_id = ?", (bytes(8 * 5), run_id))
+    conn.commit()
+    result = runner.invoke(app, ["--db", url, "plan", "--resume", str(run_id), "--workers", "1"])
+    assert result.exit_code != 0
+    status, message = conn.execute("select status, message from runs where id = ?", (run_id,)).fetchone()
+    conn.close()
+    assert status == "failed" and message.startswith("ValueError"), (status, message)

@@ -300,6 +300,8 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
             raise EvalInputError("a goal file holding one list needs a set name (--name)")
         named = {name: data}
     elif isinstance(data, dict):
+        if not data:
+            raise EvalInputError("the goal file holds an empty object: no set to import")
         joint = "" if not name or name.endswith(("-", "_", ".", "/")) else "-"  # --name t- -> t-one
         named = {(f"{name}{joint}{k}" if name else str(k)): v for k, v in data.items()}
     else:

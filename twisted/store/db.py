@@ -400,7 +400,10 @@ def make_engine(url: URL, readonly: bool = False) -> Engine:
     try:
         engine = create_engine(url, **kwargs)
     except (ArgumentError, NoSuchModuleError, ImportError) as exc:
-        raise StoreError(f"cannot use database {_display(url)!r}: {exc}") from exc
+        hint = ""
+        if isinstance(exc, ImportError) and url.get_backend_name() == "postgresql":
+            hint = " (PostgreSQL needs the distributed extra: pip install 'twisted-knots[distributed]')"
+        raise StoreError(f"cannot use database {_display(url)!r}: {exc}{hint}") from exc
     if url.get_backend_name() == "sqlite":
         on_connect = _sqlite_readonly_on_connect if path is not None else _sqlite_on_connect
         event.listen(engine, "connect", on_connect)

@@ -72,6 +72,7 @@ __all__ = [
     "StoredNode",
     "find_resumable_run",
     "load_run",
+    "mark_failed",
     "solution_path",
     "solved_run",
     "take_lease",
@@ -529,6 +530,19 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             host=run.host,
             pid=run.pid,
             last_write=checkpoint_row.updated_at if checkpoint_row is not None else None,
+        )
+
+
+def mark_failed(store: Any, run_id: int | None, message: str) -> None:
+    """End planner run ``run_id`` as ``failed`` with ``message`` (what killed it), unless it has already
+    ended: a run that dies of an exception is not left ``running`` (a resume would take it up again)."""
+    if run_id is None:
+        return
+    with store.session(write=True) as session:
+        session.execute(
+            update(Run)
+            .where(Run.id == run_id, Run.status == "running")
+            .values(**Run.end_values("failed", message[:2000]))
         )
 
 

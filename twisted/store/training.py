@@ -15,7 +15,7 @@ import datetime as dt
 import math
 from typing import Any
 
-from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String
+from sqlalchemy import JSON, BigInteger, DateTime, Float, ForeignKey, Integer, LargeBinary, String, delete
 from sqlalchemy.orm import Mapped, mapped_column, validates
 
 from twisted.store.models import Base, RunLifecycle, utcnow
@@ -99,9 +99,11 @@ class TrainedModel(Base):
 
 
 def mark_training_failed(store: Any, training_run_id: int, message: str) -> None:
-    """End a training run as ``failed`` (it cannot be resumed) with ``message``."""
+    """End a training run as ``failed`` (it cannot be resumed) with ``message``; its checkpoints go
+    (a diverged run's hold NaN weights, and nothing resumes a failed run)."""
     with store.session(write=True) as session:
         row = session.get(TrainingRun, training_run_id)
         if row is not None:  # the message held the command line: keep it after the reason
             row.status, row.ended_at = "failed", utcnow()
             row.message = message if not row.message else f"{message}\n{row.message}"
+        session.execute(delete(Checkpoint).where(Checkpoint.training_run_id == training_run_id))
