@@ -9,8 +9,8 @@ CLI (``python -m cli.main``, as installed, or from ``PYTHONPATH``: run it once w
 printed, whether a planted pickle ran (it creates a marker file when unpickled) and what the trial
 checks besides. Nothing outside ``--work`` (default: a temporary folder) is written.
 
-The trials of items 3, 5, 6, 8, 9, 11, 12 and 13 (the other half of the issue) are added by their
-helper in the same form (:data:`TRIALS`).
+The trials of items 3, 5, 6, 8, 9 and 11 (the other half of the issue) come from
+``bench/probe_store.py`` in the same form; items 12 and 13 need a Ray cluster and are tested there.
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def digest(db: Path) -> str:
 
 
 def said(out: Outcome, extra: str = "") -> str:
-    tail = out.text[-160:] if out.traceback else out.text[:160]
+    tail = out.text[-300:] if out.traceback else out.text
     return f"exit {out.code}{', TRACEBACK' if out.traceback else ''}{extra}: {tail}"
 
 
@@ -326,6 +326,31 @@ def pictures_of_similar_names(db: Path, work: Path) -> str:
     return "; ".join(names)
 
 
+def plan_run_that_dies(db: Path, work: Path) -> str:
+    """A search that dies of an exception (its stored states of the wrong length) is marked failed."""
+    args = ["plan", "--goal", ONE, "--planner", "random-low", "--max-iterations", "1", "--workers", "1"]
+    first = cli(db, *args, "--json", cwd=work)
+    try:
+        run_id = json.loads(first.text[first.text.index("{") :])["run_id"]
+    except ValueError:
+        return f"could not start a run: {said(first)}"
+    _sql(db, "update search_nodes set q = ? where run_id = ?", bytes(40), run_id)
+    out = cli(db, "plan", "--resume", str(run_id), "--workers", "1", cwd=work)
+    conn = sqlite3.connect(db)
+    status = conn.execute("select status from runs where id = ?", (run_id,)).fetchone()[0]
+    conn.close()
+    return f"run {status}; " + said(out)
+
+
+def cosmetic(args: list[str], setup: str | None = None) -> Callable[[Path, Path], str]:
+    def trial(db: Path, work: Path) -> str:
+        if setup is not None:
+            (work / "goals.json").write_text(setup)
+        return said(cli(db, *args, cwd=work))
+
+    return trial
+
+
 TRIALS: list[Trial] = [
     Trial("1", "train --resume, planted checkpoint", "exit 2, no code", planted_checkpoint, exit2_clean),
     Trial("1", "plan, planted model weights", "exit 2, no code", planted_weights, exit2_clean),
@@ -367,6 +392,13 @@ TRIALS: list[Trial] = [
         plan_with_huge_model,
         lambda t: t.startswith("exit 2:") and "running" not in t.split(":")[0],
     ),
+    Trial(
+        "4",
+        "plan --resume, a search that dies",
+        "run marked failed",
+        plan_run_that_dies,
+        lambda t: t.startswith("run failed"),
+    ),
     Trial("7", "report --out onto an existing file", "exit 2", report_onto("afile"), exit2_clean),
     Trial("7", "report --out /proc/x", "exit 2", report_onto("/proc/x"), exit2_clean),
     Trial("7", "models --export into a missing folder", "exit 2", export_into_missing, exit2_clean),
@@ -381,8 +413,46 @@ TRIALS: list[Trial] = [
     Trial("10", "problems import --name 'a\\nb'", "exit 2", import_set("a\nb"), exit2_clean),
     Trial("10", "problems import --name '  '", "exit 2", import_set("  "), exit2_clean),
     Trial("10", "eval --label 'x\\x07y'", "exit 2", eval_label("x\x07y"), exit2_clean),
+    Trial(
+        "14",
+        "train --lr nan",
+        "exit 2, 'not a finite number'",
+        cosmetic(["train", "--lr", "nan"]),
+        lambda t: t.startswith("exit 2:") and "not a finite number" in t,
+    ),
+    Trial(
+        "14",
+        "problems import {}",
+        "exit 2",
+        cosmetic(["problems", "import", "goals.json"], "{}"),
+        exit2_clean,
+    ),
+    Trial(
+        "14",
+        "problems import --name t- (object)",
+        "set t-one",
+        cosmetic(
+            ["problems", "import", "goals.json", "--name", "t-"], json.dumps({"one": [json.loads(ONE)]})
+        ),
+        lambda t: "t-one" in t and "t--one" not in t,
+    ),
     Trial("10", "sets a/b and a_b", "distinct pictures (or one refused)", pictures_of_similar_names, None),
 ]
+
+
+def _store_trials() -> list[Trial]:
+    """The trials of items 3, 5, 6, 8, 9 and 11 (``bench/probe_store.py``, the other half of the issue)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    try:
+        import probe_store  # type: ignore[import-not-found]
+    except ImportError:
+        return []
+    finally:
+        sys.path.pop(0)
+    return [Trial(*trial) for trial in probe_store.TRIALS]
+
+
+TRIALS += _store_trials()
 
 
 def main() -> None:

@@ -262,3 +262,10 @@ def test_a_failed_training_run_keeps_no_checkpoint(tmp_path: Path) -> None:
         with store.session() as session:
             assert session.get(TrainingRun, run_id).status == "failed"
             assert session.query(Checkpoint).filter(Checkpoint.training_run_id == run_id).count() == 0
+
+
+def test_file_names_too_long_for_the_file_system_are_refused(tmp_path: Path) -> None:
+    assert "too long" in (output_problem(tmp_path / ("x" * 300)) or "")
+    assert "too long" in (output_problem("/".join(["d" * 200] * 30)) or "")
+    result = runner.invoke(app, ["--log-file", "x" * 5000, "knots", "list"])
+    assert result.exit_code == 2 and "too long" in said(result)

@@ -312,6 +312,12 @@ def store_files(database: str | os.PathLike[str] | None) -> tuple[str, ...]:
     return tuple(real + suffix for suffix in STORE_SUFFIXES)
 
 
+def _too_long(path: str) -> bool:
+    """Whether a name in ``path`` passes 255 bytes or the whole 4095 (what Linux file systems take)."""
+    raw = os.fsencode(path)
+    return len(raw) > 4095 or any(len(part) > 255 for part in raw.split(b"/"))
+
+
 def _same(a: str, b: str) -> bool:
     """Whether ``a`` and ``b`` are one file (a hard link too); False when either is missing."""
     try:
@@ -339,6 +345,8 @@ def output_problem(
     if not text or "\0" in text:
         return "is not a file name"
     real = os.path.realpath(text)
+    if _too_long(real):
+        return "is too long a file name (255 bytes a name, 4095 a path)"
     if real in protected or (os.path.exists(real) and any(_same(real, p) for p in protected)):
         return "is the database this command has open (or its -wal/-shm/-journal file): give another path"
     if any(real == root or real.startswith(root + "/") for root in KERNEL_FILE_SYSTEMS):
@@ -376,6 +384,8 @@ def output_folder_problem(
     if not text or "\0" in text:
         return "is not a folder name"
     real = os.path.realpath(text)
+    if _too_long(os.path.join(real, marker)):
+        return "is too long a folder name (255 bytes a name, 4095 a path)"
     if any(real == root or real.startswith(root + "/") for root in KERNEL_FILE_SYSTEMS):
         return "is on a kernel file system (/proc, /sys, /dev), not a place for files: give another folder"
     if os.path.lexists(text) and not os.path.isdir(real):
