@@ -339,6 +339,8 @@ def _set_up(
         step("enumerating the knot's states" if request.knot is not None else "checking the goal")
         try:
             other_start = request.from_run is not None or request.start_config is not None
+            if request.knot is not None:
+                _prime_knot_states(ctx, request)
             goal_p = make_any_goal(request.goal, request.knot, request.crossings, other_start=other_start)
         except PlanInputError as exc:
             fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
@@ -355,6 +357,22 @@ def _set_up(
     step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
     pool = resources.enter_context(SimPool(request.workers))
     return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool, request)
+
+
+def _prime_knot_states(ctx: typer.Context, request: _Request) -> None:
+    """A 5-crossing knot goal enumerates and names every state of 5 crossings; the database keeps the
+    sets (``knot_state_sets``), so that this is paid once per database. A name that is no knot is left
+    to the goal's own check (exit 2 before anything is opened)."""
+    from twisted.knots import KnotNameError, least_crossings
+    from twisted.store.knots import CACHED_CROSSINGS, prime_knot_goal
+
+    try:
+        count = request.crossings if request.crossings is not None else least_crossings(request.knot or "")
+    except KnotNameError:
+        return
+    if count in CACHED_CROSSINGS:
+        with open_db(ctx, needed_by=_needs_stored(request)) as store:
+            prime_knot_goal(store, request.knot, count)
 
 
 def _needs_stored(request: _Request) -> str | None:

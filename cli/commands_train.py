@@ -333,10 +333,15 @@ def models_command(
         shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"
         console.print(f"no models in the database; planning uses {shipped}")
         return
+    from twisted.store.improve import lineage_labels
+
+    with store.session() as session:
+        generations = lineage_labels(session)  # expert iteration (`twisted improve`)
     table = Table(
         "id",
         "name",
         "training run",
+        "generation",
         "data size",
         "train samples by source",
         "val NLL",
@@ -350,6 +355,7 @@ def models_command(
             m.name,
             ("-" if m.training_run_id is None else str(m.training_run_id))
             + ("" if m.metrics.get("init_model_id") is None else f" (from {m.metrics['init_model_id']})"),
+            generations.get(m.id, "-"),
             str(m.data_size),
             _by_source(m.metrics, "train"),
             _fmt(m.metrics.get("val_loss")),

@@ -292,3 +292,99 @@ def test_rope_env_takes_knot_goals_like_the_planner(tmp_path: Path) -> None:
     assert _cli(db, "problems", "knots", "figure-eight", "--name", "k")[0] == 0
     # a knot goal of a problem set stands for all its states
     assert goal_pool(problem_set="k", db_url=db) == list(knot_goal("figure-eight").states)
+
+
+# --- goal sets drawn the way people name goals (issue 36) ------------------------------------------------
+
+
+def test_a_set_drawn_with_a_seed_is_the_same_set_again() -> None:
+    import numpy as np
+
+    from twisted.experiments.goalsets import sample_states
+    from twisted.experiments.problems import draw_named_set
+
+    first = [r.goal_key for r in draw_named_set("u4", 5, seed=3)]
+    assert first == [r.goal_key for r in draw_named_set("u4", 5, seed=3)]
+    assert first != [r.goal_key for r in draw_named_set("u4", 5, seed=4)]
+    assert len(set(first)) == 5 and all(parse_p_data(k).cross == 4 for k in first)
+    # the sampler (6 crossings; 3 here to keep the test short) is seeded the same way
+    a = [p.key for p in sample_states(3, 4, np.random.default_rng(9))]
+    assert a == [p.key for p in sample_states(3, 4, np.random.default_rng(9))]
+    assert len(set(a)) == 4 and all(parse_p_data(k).cross == 3 for k in a)
+
+
+def test_the_head_tree_holds_every_state_once() -> None:
+    """Each state of n crossings is the head child of exactly one state of n - 1 (the sampler's tree)."""
+    from twisted.experiments.goalsets import head_children, head_parent
+
+    layers = enumerate_states(3)
+    for c in (1, 2, 3):
+        children = [k for p in layers[c - 1] for k in head_children(p)]
+        assert sorted(children, key=lambda p: p.key) == layers[c]
+        assert all(head_parent(k) in layers[c - 1] for k in children)
+
+
+def test_uniform_draws_leave_out_excluded_states() -> None:
+    import numpy as np
+
+    from twisted.experiments.goalsets import uniform_states
+
+    three = enumerate_states(3)[3]
+    keep = {p.key for p in three[:4]}
+    drawn = uniform_states(3, 10, np.random.default_rng(0), exclude=frozenset(p.key for p in three) - keep)
+    assert {p.key for p in drawn} == keep
+
+
+def test_goal_set_files_are_imported_with_their_seed(sqlite_url: str, tmp_path: Path) -> None:
+    code, out = _cli(
+        sqlite_url, "problems", "make", "--set", "u4", "--seed", "5", "--per-set", "3", "--prefix", "t-"
+    )
+    assert code == 0, out
+    target = tmp_path / "t-u4.json"
+    code, out = _cli(sqlite_url, "problems", "export", "t-u4", "--out", str(target), "--kind", "u4")
+    assert code == 0, out
+    text = target.read_text()
+    assert json.loads(text)["seed"] == 5
+    other = f"sqlite:///{tmp_path / 'other.db'}"
+    code, out = _cli(other, "problems", "import", str(target))
+    assert code == 0, out
+    with open_store(sqlite_url) as a, a.session() as s1, open_store(other) as b, b.session() as s2:
+        made, imported = load_problem_set(s1, "t-u4"), load_problem_set(s2, "t-u4")
+        assert made is not None and imported is not None
+        assert [p.goal_key for p in made.problems] == [p.goal_key for p in imported.problems]
+    with open_store(other) as b, b.session() as s2:
+        from twisted.store.experiments import ProblemSet
+
+        row = s2.scalar(select(ProblemSet).where(ProblemSet.name == "t-u4"))
+        assert row is not None and row.seed == 5 and row.parameters["kind"] == "u4"
+
+
+def test_the_committed_goal_sets_import() -> None:
+    from twisted.experiments.problems import goal_file_header
+
+    files = sorted(Path(__file__).parent.parent.joinpath("goalsets").glob("*.json"))
+    assert files, "goalsets/ holds the sets behind the figures"
+    for path in files:
+        text = path.read_text()
+        header = goal_file_header(text)
+        assert isinstance(header["seed"], int) and header["name"] == path.stem
+        (goals,) = parse_goal_file(text).values()
+        assert goals
+
+
+def test_knot_state_sets_are_kept_in_the_store(sqlite_url: str) -> None:
+    """Computed once, read back by the next process: the same sets (3 crossings keep the test short)."""
+    from twisted.knots import prime_states_by_type, states_by_type, states_tying
+    from twisted.store.knots import KnotStateSet, cached_states_by_type
+
+    with open_store(sqlite_url) as store:
+        first = cached_states_by_type(store, 3)
+        with store.session() as session:
+            rows = session.scalars(select(KnotStateSet).where(KnotStateSet.crossings == 3)).all()
+            assert {r.knot_type for r in rows} == set(first)
+            assert sum(r.n_states for r in rows) == len(enumerate_states(3)[3]) == 528
+        prime_states_by_type(3, {})  # as a new process would start: nothing known
+        assert states_by_type(3) == {}
+        again = cached_states_by_type(store, 3)
+    assert again == first
+    assert states_tying("overhand", 3) == sorted(first["3_1+"] + first["3_1-"], key=lambda p: p.key)

@@ -13,6 +13,14 @@ visited, topped up with states one move beyond the goals of ``4``. From every po
 (10 in the paper) are drawn without replacement by one seeded generator, in the fixed order easy,
 medium, hard, unseen-3, 4, 5, so a seed reproduces every set.
 
+Sets drawn the way people name goals (:data:`NAMED_SETS`, ``docs/goals.md``): ``u4`` and ``u5`` draw
+states uniformly from every state of 4 and 5 crossings (the enumeration), ``u6`` from the 6-crossing
+states by the head-tree sampler of :mod:`twisted.experiments.goalsets` (close to uniform, measured by
+``bench/sampler_tv.py``), and ``catalogue`` holds every named knot up to 6 crossings in both
+chiralities as knot goals (its parameters say that the pull test is required). Each of these sets is
+drawn by its own generator ``default_rng([seed, n])`` (n: its crossing count, 0 for the catalogue),
+so a seed gives the same set whichever others are asked for.
+
 Imported sets come from a goal file (:func:`parse_goal_file`: P-data or knots) or a list of goals
 (:func:`save_goal_sets`), stored in one transaction or not at all.
 """
@@ -43,6 +51,12 @@ from twisted.topology import PData, PDataError, json_int, parse_p_data
 
 __all__ = [
     "ALL_MADE_SETS",
+    "CATALOGUE_KNOTS",
+    "GOAL_SET_FORMAT",
+    "MAKEABLE_SETS",
+    "NAMED_SETS",
+    "draw_named_set",
+    "goal_set_file",
     "DIFFICULTY_SETS",
     "FIVE_SET",
     "FOUR_SET",
@@ -65,6 +79,13 @@ UNSEEN_SET = "unseen-3"
 FOUR_SET = "4"
 FIVE_SET = "5"
 ALL_MADE_SETS = (*DIFFICULTY_SETS, UNSEEN_SET, FOUR_SET, FIVE_SET)
+# Sets drawn the way people name goals (not from our data): crossing count per uniform set
+NAMED_SETS = {"u4": 4, "u5": 5, "u6": 6, "catalogue": 0}
+MAKEABLE_SETS = (*ALL_MADE_SETS, *NAMED_SETS)
+# The catalogue set: every named knot up to 6 crossings, each chirality apart (square is its own mirror)
+CATALOGUE_KNOTS = ("3_1+", "3_1-", "4_1", "5_1+", "5_1-", "5_2+", "5_2-", "granny+", "granny-", "square")
+# Marks a goal file that carries one set with how it was drawn (``goal_set_file``)
+GOAL_SET_FORMAT = "twisted-goal-set/1"
 
 
 class EvalInputError(ValueError):
@@ -183,6 +204,44 @@ def make_problem_sets(
     return out
 
 
+def draw_named_set(
+    kind: str, per_set: int, seed: int, exclude: frozenset[str] = frozenset()
+) -> list[ProblemRecord]:
+    """The goals of a named set (:data:`NAMED_SETS`), drawn by ``default_rng([seed, n])``; pure.
+
+    Uniform sets list their states in draw order; ``exclude`` holds goal keys never drawn (e.g. the
+    goals of evaluation sets). The catalogue ignores ``per_set`` and ``seed``.
+    """
+    from twisted.experiments.goalsets import MAX_UNIFORM_ENUMERATED, sample_states, uniform_states
+
+    if kind not in NAMED_SETS:
+        raise EvalInputError(f"unknown set {kind!r}: choose from {', '.join(MAKEABLE_SETS)}")
+    if per_set < 1:
+        raise EvalInputError(f"--per-set must be at least 1, got {per_set}")
+    n = NAMED_SETS[kind]
+    if n == 0:
+        from twisted.goals import knot_goal
+
+        goals = [knot_goal(name) for name in CATALOGUE_KNOTS]
+        return [
+            ProblemRecord(None, i, g.representative, 0, "catalogue", spec=g.spec) for i, g in enumerate(goals)
+        ]
+    rng = np.random.default_rng([seed, n])
+    if n <= MAX_UNIFORM_ENUMERATED:
+        states, tag = uniform_states(n, per_set, rng, exclude=exclude), f"uniform-{n}"
+    else:
+        states, tag = sample_states(n, per_set, rng, exclude=exclude), f"sampled-{n}"
+    return [ProblemRecord(None, i, p, 0, tag) for i, p in enumerate(states)]
+
+
+def _named_parameters(kind: str, per_set: int) -> dict[str, Any]:
+    if kind == "catalogue":
+        return {"kind": kind, "knots": list(CATALOGUE_KNOTS), "tighten": True, "pull_test": "required"}
+    n = NAMED_SETS[kind]
+    how = "uniform over the enumeration" if n <= 5 else "head-tree walks, importance-resampled toward uniform"
+    return {"kind": kind, "per_set": per_set, "crossings": n, "draw": how}
+
+
 def _enumerated(c: int) -> list[PData]:
     from twisted.moves import enumerate_states
 
@@ -204,7 +263,12 @@ def make_problem_sets_in_store(
     An existing set of the same name is an error unless ``replace`` (allowed only while no
     evaluation result refers to it).
     """
-    sets = [s for s in ALL_MADE_SETS if s in set(sets)]
+    asked = set(sets)
+    unknown = asked - set(MAKEABLE_SETS)
+    if unknown:
+        raise EvalInputError(f"unknown set {sorted(unknown)[0]!r}: choose from {', '.join(MAKEABLE_SETS)}")
+    sets = [s for s in ALL_MADE_SETS if s in asked]
+    named = [s for s in NAMED_SETS if s in asked]
     with store.session() as session:
         frequencies = state_frequencies(session)
     three_visited = sum(1 for p, n in frequencies.values() if p.cross == 3 and n > 0)
@@ -213,13 +277,17 @@ def make_problem_sets_in_store(
             f"the data visited {three_visited} three-crossing states; easy/medium/hard need at least 3 "
             "(collect data first: `twisted collect`)"
         )
-    drawn = make_problem_sets(frequencies, reachable, per_set=per_set, seed=seed, sets=sets)
+    drawn = make_problem_sets(frequencies, reachable, per_set=per_set, seed=seed, sets=sets) if sets else {}
     parameters = {
         "per_set": per_set,
         "frequency": "kept transitions reaching the state",
         "three_crossing_states_visited": three_visited,
         "transitions": sum(n for _, n in frequencies.values()),
     }
+    set_parameters = {name: parameters for name in drawn}
+    for kind in named:
+        drawn[kind] = draw_named_set(kind, per_set, seed)
+        set_parameters[kind] = _named_parameters(kind, per_set)
     with store.session(write=True) as session:
         for name in drawn:
             full = f"{prefix}{name}"
@@ -235,7 +303,9 @@ def make_problem_sets_in_store(
                     )
                 delete_problem_set(session, existing.id)
                 session.flush()
-            save_problem_set(session, full, drawn[name], source="made", seed=seed, parameters=parameters)
+            save_problem_set(
+                session, full, drawn[name], source="made", seed=seed, parameters=set_parameters[name]
+            )
     with store.session() as session:
         return [r for name in drawn if (r := load_problem_set(session, f"{prefix}{name}")) is not None]
 
@@ -295,7 +365,13 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
         raise EvalInputError(message) from None
     except PDataError as exc:  # an integer beyond 64 bits
         raise EvalInputError(f"goal file: {exc}") from None
-    if isinstance(data, list):
+    if isinstance(data, dict) and data.get("format") == GOAL_SET_FORMAT:
+        if not isinstance(data.get("name"), str) or not isinstance(data.get("goals"), list):
+            raise EvalInputError(
+                f"a {GOAL_SET_FORMAT} file needs 'name' (text) and 'goals' (a list of goals)"
+            )
+        named = {name or data["name"]: data["goals"]}
+    elif isinstance(data, list):
         if not name:
             raise EvalInputError("a goal file holding one list needs a set name (--name)")
         named = {name: data}
@@ -360,12 +436,65 @@ def goal_problems(
 
 
 def import_problem_sets(store: Any, text: str, name: str | None = None) -> list[ProblemSetRecord]:
-    """Validate a goal file completely, then store all its sets in one transaction (or none)."""
+    """Validate a goal file completely, then store all its sets in one transaction (or none).
+
+    A goal-set file (:func:`goal_set_file`) keeps its seed and how it was drawn in the set's row."""
     goals = parse_goal_file(text, name)
-    return save_goal_sets(store, goals, "imported")
+    header = goal_file_header(text)
+    return save_goal_sets(store, goals, "imported", seed=header.get("seed"), parameters=header)
 
 
-def save_goal_sets(store: Any, goals: Mapping[str, Sequence[Goal]], tag: str) -> list[ProblemSetRecord]:
+def goal_file_header(text: str) -> dict[str, Any]:
+    """What a goal-set file says besides its goals (kind, seed, command ...); {} for plain goal files."""
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError):
+        return {}
+    if not isinstance(data, dict) or data.get("format") != GOAL_SET_FORMAT:
+        return {}
+    header = {k: v for k, v in data.items() if k != "goals"}
+    seed = header.get("seed")
+    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool)):
+        raise EvalInputError(f"a {GOAL_SET_FORMAT} file's seed must be an integer, got {seed!r}")
+    return header
+
+
+def goal_set_file(
+    record: ProblemSetRecord,
+    *,
+    kind: str,
+    seed: int | None,
+    command: str,
+    parameters: Mapping[str, Any] | None = None,
+) -> str:
+    """A stored set as a goal-set file: JSON with its name, kind, seed, the command that drew it, goals.
+
+    ``twisted problems import FILE`` reads it back (the same goals, in order, with the seed)."""
+    goals: list[Any] = [
+        p.goal_key.removeprefix("knot:") if p.spec is not None else p.p_data.to_list()
+        for p in record.problems
+    ]
+    body = {
+        "format": GOAL_SET_FORMAT,
+        "name": record.name,
+        "kind": kind,
+        "seed": seed,
+        "command": command,
+        "parameters": dict(parameters or {}),
+    }
+    lines = ",\n".join("    " + json.dumps(g, separators=(",", ":")) for g in goals)
+    head = json.dumps(body, indent=2)[:-2]  # without the closing brace
+    return f'{head},\n  "goals": [\n{lines}\n  ]\n}}\n'
+
+
+def save_goal_sets(
+    store: Any,
+    goals: Mapping[str, Sequence[Goal]],
+    tag: str,
+    *,
+    seed: int | None = None,
+    parameters: Mapping[str, Any] | None = None,
+) -> list[ProblemSetRecord]:
     """Store new problem sets of the given goals (``source = 'imported'``) in one transaction, or none."""
     with store.session() as session:
         frequencies = state_frequencies(session)
@@ -379,7 +508,8 @@ def save_goal_sets(store: Any, goals: Mapping[str, Sequence[Goal]], tag: str) ->
                 set_name,
                 goal_problems(set_goals, frequencies, tag),
                 source="imported",
-                parameters={"goals": len(set_goals)},
+                seed=seed,
+                parameters={**(parameters or {}), "goals": len(set_goals)},
             )
     with store.session() as session:
         return [r for set_name in goals if (r := load_problem_set(session, set_name)) is not None]

@@ -81,7 +81,10 @@ from twisted.knots.states import (
     MAX_BUILT_CROSSINGS,
     MAX_ENUMERATED_CROSSINGS,
     least_crossings,
+    prime_states_by_type,
+    primed_states,
     rotations,
+    states_by_type,
     states_tying,
 )
 
@@ -109,8 +112,11 @@ __all__ = [
     "knot_type_name",
     "least_crossings",
     "mirror_type",
+    "prime_states_by_type",
+    "primed_states",
     "resolve_knot",
     "rotations",
     "simplify",
+    "states_by_type",
     "states_tying",
 ]

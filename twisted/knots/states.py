@@ -18,7 +18,10 @@ __all__ = [
     "MAX_BUILT_CROSSINGS",
     "MAX_ENUMERATED_CROSSINGS",
     "least_crossings",
+    "prime_states_by_type",
+    "primed_states",
     "rotations",
+    "states_by_type",
     "states_tying",
 ]
 
@@ -29,14 +32,40 @@ MAX_ENUMERATED_CROSSINGS = 5
 MAX_BUILT_CROSSINGS = 6
 
 
+# Sets handed in from elsewhere (the store's cache, twisted.store.knots): crossings -> type -> states
+_PRIMED: dict[int, dict[str, tuple[PData, ...]]] = {}
+
+
 @lru_cache(maxsize=16)
-def _states_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
+def _enumerated_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
     from twisted.moves import enumerate_states
 
     out: dict[str, list[PData]] = {}
     for p in enumerate_states(crossings)[crossings]:
         out.setdefault(identify(p).name, []).append(p)
     return {name: tuple(states) for name, states in out.items()}
+
+
+def states_by_type(crossings: int) -> dict[str, tuple[PData, ...]]:
+    """Every state of ``crossings`` crossings by what it ties (``RopeKnot.name``: a knot, ``"knotoid"``,
+    ``"unknown"``), each list sorted by key: the sets :func:`prime_states_by_type` was given, else the
+    enumeration (5 crossings: 130,304 states, a minute or more; cached per process)."""
+    if crossings in _PRIMED:
+        return _PRIMED[crossings]
+    return _enumerated_by_type(crossings)
+
+
+def primed_states(crossings: int) -> tuple[PData, ...] | None:
+    """Every state of ``crossings`` crossings sorted by key when its sets were primed, else None."""
+    if crossings not in _PRIMED:
+        return None
+    return tuple(sorted((p for states in _PRIMED[crossings].values() for p in states), key=lambda p: p.key))
+
+
+def prime_states_by_type(crossings: int, by_type: dict[str, tuple[PData, ...]]) -> None:
+    """Hand in the sets of :func:`states_by_type` computed before (the store keeps them: a 5-crossing
+    knot's set-up is paid once per database, not once per process)."""
+    _PRIMED[crossings] = dict(by_type)
 
 
 def _shifted(p: PData, offset: int) -> list[tuple[int, int, int]]:
@@ -86,8 +115,8 @@ def _composite_states(knot_type: str, crossings: int) -> tuple[PData, ...]:
         return ()
     found: dict[str, PData] = {}
     for order in ((first, second), (second, first)):
-        heads = [p for p in _states_by_type(crossing_number(order[0])).get(order[0], ()) if _ends_together(p)]
-        tails = [p for p in _states_by_type(crossing_number(order[1])).get(order[1], ()) if _ends_together(p)]
+        heads = [p for p in states_by_type(crossing_number(order[0])).get(order[0], ()) if _ends_together(p)]
+        tails = [p for p in states_by_type(crossing_number(order[1])).get(order[1], ()) if _ends_together(p)]
         for a in heads:
             for b in tails:
                 joined = PData.from_crossings(_shifted(a, 0) + _shifted(b, len(a.visits)))
@@ -141,5 +170,5 @@ def states_tying(name: str, crossings: int | None = None, max_crossings: int = 4
                 f"{MAX_BUILT_CROSSINGS})"
             )
         else:
-            found.extend(_states_by_type(crossings).get(t, ()))
+            found.extend(states_by_type(crossings).get(t, ()))
     return sorted(found, key=lambda p: p.key)

@@ -26,6 +26,7 @@ from sqlalchemy import (
     LargeBinary,
     String,
     Text,
+    UniqueConstraint,
     column,
     func,
     select,
@@ -38,6 +39,10 @@ from twisted.store.queries import get_or_create_state
 
 __all__ = [
     "KNOT_VIEW_NAMES",
+    "KnotStateSet",
+    "cached_states_by_type",
+    "prime_goal_spec",
+    "prime_knot_goal",
     "Tightening",
     "TighteningRecord",
     "record_tightening",
@@ -234,3 +239,112 @@ def tightenings(session: Session, run_id: int) -> list[TighteningRecord]:
         )
         for r in rows
     ]
+
+
+# --- the knot-state sets (revision 0012) ----------------------------------------------------------------
+
+
+class KnotStateSet(Base):
+    """Every state of one crossing count that ties one knot type (or is a knotoid, or ties none named):
+    the sets :func:`twisted.knots.states_by_type` computes by enumerating, kept so that a 5-crossing
+    knot goal's set-up (130,304 states enumerated and named) is paid once per database."""
+
+    __tablename__ = "knot_state_sets"
+    __table_args__ = (UniqueConstraint("crossings", "knot_type", "moves_version"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    crossings: Mapped[int] = mapped_column(Integer)
+    knot_type: Mapped[str] = mapped_column(String(64))
+    moves_version: Mapped[int] = mapped_column(Integer)  # twisted.moves.MOVES_VERSION it was made with
+    n_states: Mapped[int] = mapped_column(Integer)
+    states: Mapped[bytes] = mapped_column(LargeBinary)  # zlib of the JSON list of P-data lists, by key
+    compute_s: Mapped[float] = mapped_column(Float)  # enumerating and naming every state of the count
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+def _pack(states: Iterable[Any]) -> bytes:
+    import json
+    import zlib
+
+    return zlib.compress(json.dumps([p.to_list() for p in states], separators=(",", ":")).encode(), 6)
+
+
+def _unpack(blob: bytes) -> tuple[Any, ...]:
+    import json
+    import zlib
+
+    from twisted.topology import parse_p_data
+
+    return tuple(parse_p_data(p) for p in json.loads(zlib.decompress(blob)))
+
+
+def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ...]]:
+    """:func:`twisted.knots.states_by_type` through the store: read when a process before computed it
+    (same move set), else computed and stored; either way handed to :mod:`twisted.knots` for this process."""
+    import time
+
+    from twisted.knots import prime_states_by_type, states_by_type
+    from twisted.moves import MOVES_VERSION
+
+    with store.session() as session:
+        rows = session.execute(
+            select(KnotStateSet.knot_type, KnotStateSet.states).where(
+                KnotStateSet.crossings == crossings, KnotStateSet.moves_version == MOVES_VERSION
+            )
+        ).all()
+    if rows:
+        by_type = {knot_type: _unpack(blob) for knot_type, blob in rows}
+        prime_states_by_type(crossings, by_type)
+        return by_type
+    t0 = time.perf_counter()
+    by_type = states_by_type(crossings)
+    compute_s = time.perf_counter() - t0
+    with store.session(write=True) as session:
+        exists = session.scalar(
+            select(func.count(KnotStateSet.id)).where(
+                KnotStateSet.crossings == crossings, KnotStateSet.moves_version == MOVES_VERSION
+            )
+        )
+        if not exists:  # another process may have stored them meanwhile
+            for knot_type, states in sorted(by_type.items()):
+                session.add(
+                    KnotStateSet(
+                        crossings=crossings,
+                        knot_type=knot_type,
+                        moves_version=MOVES_VERSION,
+                        n_states=len(states),
+                        states=_pack(states),
+                        compute_s=compute_s,
+                    )
+                )
+    prime_states_by_type(crossings, by_type)
+    return by_type
+
+
+# Crossing counts whose enumeration is worth keeping (below 5 it takes seconds)
+CACHED_CROSSINGS = (5,)
+
+
+def prime_knot_goal(store: Any, knot: str | None, crossings: int | None = None) -> None:
+    """Before a knot goal is built: read (or make and keep) the sets it enumerates. Does nothing for a
+    name that is no knot (the goal's own check reports it) or a count that is not enumerated."""
+    from twisted.knots import KnotNameError, least_crossings
+
+    if knot is None:
+        return
+    try:
+        count = crossings if crossings is not None else least_crossings(knot)
+    except KnotNameError:
+        return
+    if count in CACHED_CROSSINGS:
+        cached_states_by_type(store, count)
+
+
+def prime_goal_spec(store: Any, spec: str) -> None:
+    """:func:`prime_knot_goal` for a stored goal spec (``knot:<name>@<crossings>``; other specs: nothing)."""
+    from twisted.goals import KNOT_PREFIX
+
+    if not spec.startswith(KNOT_PREFIX):
+        return
+    name, _, count = spec[len(KNOT_PREFIX) :].partition("@")
+    prime_knot_goal(store, name, int(count) if count.isdigit() else None)

@@ -1,0 +1,150 @@
+"""Expert iteration (`twisted improve`): evaluation goals are never trained on; a generation plans."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select
+from typer.testing import CliRunner
+
+from cli.main import app
+from twisted.experiments.improve import ImproveConfig, evaluation_goal_keys, improve, training_goals
+from twisted.experiments.problems import draw_named_set
+from twisted.moves import enumerate_states
+from twisted.store import open_store
+from twisted.store.improve import ImproveGeneration
+
+runner = CliRunner()
+
+
+def _cli(db: str, *args: str) -> tuple[int, str]:
+    result = runner.invoke(app, ["--db", db, *args])
+    return result.exit_code, result.output
+
+
+def _write_set(tmp_path: Path, name: str, goals: list[object]) -> Path:
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps({"format": "twisted-goal-set/1", "name": name, "seed": 1, "goals": goals}))
+    return path
+
+
+def _one_crossing_goals() -> list[object]:
+    return [p.to_list() for p in enumerate_states(1)[1]]
+
+
+def test_improve_refuses_an_evaluation_set_as_training_goals(sqlite_url: str, tmp_path: Path) -> None:
+    tune = _write_set(tmp_path, "tune-x", _one_crossing_goals()[:1])
+    final = _write_set(tmp_path, "final-x", _one_crossing_goals()[1:3])
+    for path in (tune, final):
+        code, out = _cli(sqlite_url, "problems", "import", str(path))
+        assert code == 0, out
+    empty = tmp_path / "no-files"
+    # a stored set named as an evaluation set, and the tuning set itself
+    for train_set in ("final-x", "tune-x"):
+        code, out = _cli(
+            sqlite_url, "improve", "--tune-set", "tune-x", "--train-set", train_set, "--goalsets", str(empty)
+        )
+        assert code == 2, out
+        assert "evaluation" in out
+    # a set with another name that holds an evaluation goal
+    sneaky = _write_set(tmp_path, "mine", _one_crossing_goals()[2:4])
+    assert _cli(sqlite_url, "problems", "import", str(sneaky))[0] == 0
+    code, out = _cli(
+        sqlite_url, "improve", "--tune-set", "tune-x", "--train-set", "mine", "--goalsets", str(empty)
+    )
+    assert code == 2 and "goal 0" in out, out
+    with open_store(sqlite_url) as store, store.session() as session:
+        assert session.scalars(select(ImproveGeneration)).all() == []
+
+
+def test_goal_files_named_final_are_evaluation_goals(sqlite_url: str, tmp_path: Path) -> None:
+    folder = tmp_path / "goalsets"
+    folder.mkdir()
+    goals = _one_crossing_goals()
+    _write_set(folder, "final-u1", goals[:2])
+    _write_set(folder, "other", goals[2:3])
+    tune = _write_set(tmp_path, "tune-y", goals[3:4])
+    assert _cli(sqlite_url, "problems", "import", str(tune))[0] == 0
+    with open_store(sqlite_url) as store, store.session() as session:
+        keys, names = evaluation_goal_keys(session, "tune-y", folder)
+    expected = {json.dumps(g, separators=(",", ":")) for g in (goals[0], goals[1], goals[3])}
+    assert keys == expected and names == ["tune-y"]
+
+
+def test_drawn_training_goals_never_hold_an_evaluation_goal() -> None:
+    fours = enumerate_states(4)[4]
+    allowed = {p.key for p in fours[:6]}
+    exclude = frozenset(p.key for p in fours) - allowed
+    drawn = training_goals(("u4",), 6, seed=0, generation=1, exclude=exclude)
+    assert {g.spec for g in drawn} == allowed
+    # seeded: the same generation draws the same goals, another generation others
+    eval_keys = frozenset(r.goal_key for r in draw_named_set("u4", 10, seed=101))
+    first = [g.spec for g in training_goals(("u4",), 5, 3, 1, eval_keys)]
+    assert first == [g.spec for g in training_goals(("u4",), 5, 3, 1, eval_keys)]
+    assert first != [g.spec for g in training_goals(("u4",), 5, 3, 2, eval_keys)]
+    assert not eval_keys & set(first)
+
+
+def test_bad_improve_options_exit_2_before_anything_is_written(sqlite_url: str) -> None:
+    for args in (["--goals", "0"], ["--draw", "u9"], ["--hours", "0"], ["--tune-iterations", "0"]):
+        code, out = _cli(sqlite_url, "improve", "--tune-set", "t", *args)
+        assert code == 2, (args, out)
+    assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
+
+
+@pytest.mark.slow
+def test_a_generation_trained_on_a_tiny_store_loads_and_plans(sqlite_url: str, tmp_path: Path) -> None:
+    """Generation 1 of a tiny lineage (two 1-crossing goals, one epoch) is a stored model that plans."""
+    from twisted.model.registry import load_model
+    from twisted.planner import PlannerOptions, curve_sampler, start_search
+    from twisted.sim import SimPool
+
+    goals = _one_crossing_goals()
+    tune = _write_set(tmp_path, "tune-z", goals[:1])
+    train = _write_set(tmp_path, "train-z", goals[1:3])
+    for path in (tune, train):
+        assert _cli(sqlite_url, "problems", "import", str(path))[0] == 0
+    config = ImproveConfig(
+        tune_set="tune-z",
+        lineage="tiny",
+        hours=0.5,
+        generations=1,
+        train_set="train-z",
+        goal_timeout_s=30.0,
+        goal_iterations=8,
+        tune_iterations=3,
+        tune_timeout_s=30.0,
+        epochs=1,
+        batch_size=16,
+        goalsets_dir=str(tmp_path / "none"),
+    )
+    with open_store(sqlite_url) as store:
+        rows = improve(store, config)
+        assert [r.generation for r in rows] == [0, 1]
+        assert all(r.status == "finished" for r in rows)
+        zero, one = rows
+        assert one.parent_model_id == zero.model_id and one.model_id not in (None, zero.model_id)
+        assert one.data["n_train_search"] + one.data.get("n_val_search", 0) > 0
+        assert one.tune_runs == 1 and len(one.training_goals) == 2
+        model = load_model(store, one.model_id)
+        assert model.model_id == one.model_id
+        sampler, used = curve_sampler(store, "twisted", one.model_id)
+        assert used == one.model_id
+        with SimPool(1) as pool:
+            search = start_search(store, _goal(goals[3]), PlannerOptions(seed=0), pool, sampler=sampler)
+            result = search.run(timeout_s=60.0, max_iterations=3)
+        assert result.sim_calls > 0 and result.nodes > 1
+        # a second call continues the lineage: nothing left to do for generation 1, so no new rows
+        assert [r.id for r in improve(store, config)] == [r.id for r in rows]
+    wide = runner.invoke(app, ["--db", sqlite_url, "models"], env={"COLUMNS": "300"})
+    assert wide.exit_code == 0 and "tiny g1 (parent 1)" in wide.output and "tiny g0" in wide.output, (
+        wide.output
+    )
+
+
+def _goal(p_data: object):  # noqa: ANN202 - a Goal
+    from twisted.goals import goal_from_spec
+
+    return goal_from_spec(json.dumps(p_data))
