@@ -154,14 +154,18 @@ def problems_export(
 ) -> None:
     """Write a stored set as a goal-set file (name, kind, seed, command, goals) for `problems import`."""
     from twisted.experiments.problems import goal_set_file
+    from twisted.runtime import name_problem
     from twisted.store.experiments import ProblemSet, load_problem_set
 
+    problem = name_problem(kind)
+    if problem is not None:
+        fail(f"--kind {kind!r} {problem}")
     if out.suffix != ".json":
-        fail(f"--out {out}: the file must end in .json")
+        fail(f"--out {str(out)!r}: the file must end in .json")
     problem = unwritable(out)
     if problem is not None:
-        fail(f"--out {out}: {problem}")
-    with open_db(ctx) as store, store.session() as session:
+        fail(f"--out {str(out)!r}: {problem}")
+    with open_db(ctx, readonly=True, needed_by=f"the set {set_name!r}") as store, store.session() as session:
         record = load_problem_set(session, set_name)
         if record is None:
             fail(f"no problem set named {set_name!r}")

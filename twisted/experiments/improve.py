@@ -92,8 +92,16 @@ class ImproveConfig:
 
     def check(self) -> None:
         """Raise :class:`EvalInputError` naming the option that is out of range."""
-        if not self.lineage or len(self.lineage) > 64:
-            raise EvalInputError(f"--name must have 1 to 64 characters, got {self.lineage!r}")
+        from twisted.runtime import name_problem
+
+        for option, name in (
+            ("--name", self.lineage),
+            ("--tune-set", self.tune_set),
+            ("--train-set", self.train_set),
+        ):
+            problem = None if name is None else name_problem(name)
+            if problem is not None:
+                raise EvalInputError(f"{option} {name!r} {problem}")
         for name, value in (("--hours", self.hours), ("--goal-timeout", self.goal_timeout_s)):
             if not value > 0:
                 raise EvalInputError(f"{name} must be positive, got {value}")
@@ -119,7 +127,7 @@ class ImproveConfig:
         unknown = [d for d in self.distributions if d not in DISTRIBUTIONS]
         if unknown or not self.distributions:
             raise EvalInputError(
-                f"--draw {', '.join(unknown) or '(none)'}: choose among {', '.join(DISTRIBUTIONS)}"
+                f"--draw {', '.join(map(repr, unknown)) or '(none)'}: choose among {', '.join(DISTRIBUTIONS)}"
             )
 
     def to_dict(self) -> dict[str, Any]:
