@@ -450,5 +450,15 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
     Messages quote what was given; a long one is cut (:func:`shorten`) so that the cause stays readable.
     """
-    err_console.print(f"[bold red]error:[/] {escape(shorten(message, MAX_MESSAGE_CHARS))}", highlight=False)
+    shown = escape(shorten(visible(message), MAX_MESSAGE_CHARS))
+    err_console.print(f"[bold red]error:[/] {shown}", highlight=False)
     raise typer.Exit(code)
+
+
+def visible(text: str) -> str:
+    """``text`` with control characters (terminal escapes, NUL, ...) written as ``\\x1b``-style escapes.
+
+    Messages quote what was given; a quoted escape sequence must not reach the terminal raw (it would
+    colour or move the cursor). Newlines stay: messages may have several lines.
+    """
+    return "".join(ch if ch == "\n" or ch.isprintable() else ascii(ch)[1:-1] for ch in text)

@@ -269,3 +269,14 @@ def test_file_names_too_long_for_the_file_system_are_refused(tmp_path: Path) -> 
     assert "too long" in (output_problem("/".join(["d" * 200] * 30)) or "")
     result = runner.invoke(app, ["--log-file", "x" * 5000, "knots", "list"])
     assert result.exit_code == 2 and "too long" in said(result)
+
+
+def test_an_error_quoting_a_terminal_escape_shows_it_escaped(tmp_path: Path) -> None:
+    """Found by test_fuzz_cli: `sensitivity plot --out ESC[31m...` echoed the escape raw."""
+    out = tmp_path / "\x1b[31mred\x1b[0m"
+    out.write_text("a file, not a folder")
+    db = f"sqlite:///{tmp_path / 'store.db'}"
+    result = runner.invoke(app, ["--db", db, "sensitivity", "plot", "--out", str(out)])
+    assert result.exit_code == 2
+    assert "\x1b" not in said(result)
+    assert "\\x1b[31mred" in said(result)
