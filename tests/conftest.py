@@ -19,6 +19,11 @@ import pytest
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
+# Rich wraps the CLI's messages at the terminal's width, 80 columns without a terminal, and can break a
+# long path inside a word a test looks for; the temporary paths of pytest-xdist workers (.../popen-gw0/...)
+# are longer still. Set before cli.app makes its consoles (at import), so every test sees one width.
+os.environ["COLUMNS"] = "200"
+
 
 @pytest.fixture
 def sqlite_url(tmp_path) -> str:
