@@ -7,6 +7,7 @@ import functools
 import inspect
 import logging
 import math
+import os
 import time
 import typing
 from collections.abc import Callable
@@ -404,6 +405,12 @@ def open_db(
         return open_store(url, create=create and needed_by is None, readonly=readonly, verify=not readonly)
     except StoreError as exc:
         fail(f"{needed_by}: {exc}" if needed_by else str(exc))
+
+
+def store_exists(ctx: typer.Context) -> bool:
+    """Whether the store at --db exists already (a PostgreSQL server's database counts as existing)."""
+    files = _store_files(db_url(ctx))
+    return not files or os.path.exists(files[0])
 
 
 def unwritable(path: Path, append: bool = False) -> str | None:

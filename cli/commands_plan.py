@@ -30,6 +30,7 @@ from cli.app import (
     err_console,
     fail,
     open_db,
+    store_exists,
     unwritable,
 )
 from cli.options import json_option, print_json, with_planner_options
@@ -333,20 +334,23 @@ def _set_up(
     from twisted.planner import PlanInputError, curve_sampler
     from twisted.planner.untie import make_any_goal
     from twisted.sim.pool import SimPool
+    from twisted.store.knots import keep_states_by_type
 
     goal_p = None
+    kept_crossings = None
     if request.goal is not None or request.knot is not None or request.crossings is not None:
         step("enumerating the knot's states" if request.knot is not None else "checking the goal")
         try:
             other_start = request.from_run is not None or request.start_config is not None
-            if request.knot is not None:
-                _prime_knot_states(ctx, request)
+            kept_crossings = _load_knot_states(ctx, request)
             goal_p = make_any_goal(request.goal, request.knot, request.crossings, other_start=other_start)
         except PlanInputError as exc:
             fail(f"{'--knot' if request.knot is not None else '--goal'}: {exc}")
     step("opening the database")
     with stop.deferred():
         store = resources.enter_context(open_db(ctx, needed_by=_needs_stored(request)))
+        if kept_crossings is not None:  # made in this process (or read): kept for the next plan
+            keep_states_by_type(store, kept_crossings)
         run_id, options, model_id = _run_to_continue(store, request, goal_p)
         step("loading the model")
         try:
@@ -359,20 +363,27 @@ def _set_up(
     return _Setup(store, goal_p, run_id, request.start_config, options, sampler, used_model_id, pool, request)
 
 
-def _prime_knot_states(ctx: typer.Context, request: _Request) -> None:
-    """A 5-crossing knot goal enumerates and names every state of 5 crossings; the database keeps the
-    sets (``knot_state_sets``), so that this is paid once per database. A name that is no knot is left
-    to the goal's own check (exit 2 before anything is opened)."""
+def _load_knot_states(ctx: typer.Context, request: _Request) -> int | None:
+    """A 5-crossing knot goal enumerates and names every state of 5 crossings (a minute); the database
+    keeps the sets (``knot_state_sets``), so that this is paid once per database. Read here when an
+    existing database has them (nothing is created before the goal is checked: a new database gets
+    them once the run's store is open); the crossing count whose sets the run's store should keep, or
+    None. A name that is no knot is left to the goal's own check (exit 2 before anything is opened)."""
     from twisted.knots import KnotNameError, least_crossings
-    from twisted.store.knots import CACHED_CROSSINGS, prime_knot_goal
+    from twisted.store.knots import CACHED_CROSSINGS, load_states_by_type
 
+    if request.knot is None:
+        return None
     try:
-        count = request.crossings if request.crossings is not None else least_crossings(request.knot or "")
+        count = request.crossings if request.crossings is not None else least_crossings(request.knot)
     except KnotNameError:
-        return
-    if count in CACHED_CROSSINGS:
-        with open_db(ctx, needed_by=_needs_stored(request)) as store:
-            prime_knot_goal(store, request.knot, count)
+        return None
+    if count not in CACHED_CROSSINGS:
+        return None
+    if store_exists(ctx):
+        with open_db(ctx, create=False) as store:
+            load_states_by_type(store, count)
+    return count
 
 
 def _needs_stored(request: _Request) -> str | None:

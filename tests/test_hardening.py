@@ -166,13 +166,13 @@ def test_ctrl_c_while_plan_enumerates_the_goal_exits_130_and_starts_no_run(
 ) -> None:
     """Before: `setsid twisted plan --goal G --timeout 20 & sleep 1.2; kill -INT -- -$!` ran all 20 s
     (3 of 3); during `--knot 5_1` enumeration as well. Now: exit 130 at once, nothing searched."""
-    import twisted.goals
+    import twisted.planner.untie
 
     def slow_goal(*args: Any, **kwargs: Any) -> Any:  # stands in for a long knot enumeration
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(30)
 
-    monkeypatch.setattr(twisted.goals, "make_goal", slow_goal)
+    monkeypatch.setattr(twisted.planner.untie, "make_goal", slow_goal)  # what the set-up calls
     url = f"sqlite:///{tmp_path / 'p.db'}"
     started = time.monotonic()
     code, out = _cli("--db", url, "plan", "--knot", "5_1", "--timeout", "20")
@@ -184,10 +184,10 @@ def test_ctrl_c_while_plan_enumerates_the_goal_exits_130_and_starts_no_run(
 def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Before: `plan --knot 5_1 --timeout 20` took 54 s, 33 s of them before the search. Now the set-up
     stops when --timeout runs out (exit 3), and a finished set-up is shown and counted."""
-    import twisted.goals
+    import twisted.planner.untie
 
-    real_make_goal = twisted.goals.make_goal
-    monkeypatch.setattr(twisted.goals, "make_goal", lambda *a, **k: time.sleep(30))
+    real_make_goal = twisted.planner.untie.make_goal
+    monkeypatch.setattr(twisted.planner.untie, "make_goal", lambda *a, **k: time.sleep(30))
     url = f"sqlite:///{tmp_path / 'p.db'}"
     started = time.monotonic()
     code, out = _cli("--db", url, "plan", "--knot", "5_1", "--timeout", "0.5")
@@ -197,7 +197,7 @@ def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest
         time.sleep(0.6)
         return real_make_goal(*args, **kwargs)
 
-    monkeypatch.setattr(twisted.goals, "make_goal", slow_goal)
+    monkeypatch.setattr(twisted.planner.untie, "make_goal", slow_goal)  # what the set-up calls
     code, out = _cli(
         "--db",
         url,

@@ -156,24 +156,26 @@ def test_plan_from_run_checks_its_inputs(tied_db: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("share", [0.0, 1.0])
-def test_collect_keeps_removing_transitions_only_when_asked(sqlite_url: str, share: float) -> None:
+def test_collect_keeps_removing_transitions_only_when_asked(tmp_path: Path, share: float) -> None:
     """With --remove-share 1 every curve that removes crossings is kept too, labelled by the state it
-    reached, and replays; with 0 (the default) none is, as before."""
-    with open_store(sqlite_url) as store:
-        summary = collect(
-            store, CollectOptions(hours=0.05, workers=1, seed=3, max_kept=8, batch_size=2, remove_share=share)
-        )
-        assert summary.status == "finished" and summary.kept >= 8
-        sim = RopeSim()
-        falling = 0
-        with store.session() as session:
-            assert session.get(Run, summary.run_id).parameters["remove_share"] == share  # type: ignore[union-attr]
-            for t in session.scalars(select(Transition)):
-                end = session.get(Configuration, t.to_configuration_id)
-                start = session.get(Configuration, t.from_configuration_id)
-                assert start is not None and end is not None and t.to_cross == end.cross != t.from_cross
-                falling += t.to_cross < t.from_cross
-                sim.set_state(start.q_array())
-                assert sim.apply(Curve(t.link, t.z_max_m, t.x_m, t.y_m)).ok
-                assert sim.p_data().cross == t.to_cross and np.array_equal(sim.state(), end.q_array())
-    assert (falling > 0) == (share > 0)
+    reached, and replays; with 0 (the default) none is, as before. Not one hand-picked seed: with share
+    1, seeds 0-2 each keep some (9, 13 and 13 of 24 at e85b54d's collector); with 0, none can."""
+    sim = RopeSim()
+    for seed in (0, 1, 2) if share else (0,):
+        with open_store(f"sqlite:///{tmp_path / f'seed{seed}.db'}") as store:
+            options = dict(hours=0.05, workers=1, seed=seed, max_kept=24, batch_size=4, remove_share=share)
+            summary = collect(store, CollectOptions(**options))
+            assert summary.status == "finished" and summary.kept >= 24
+            falling = 0
+            with store.session() as session:
+                run = session.get(Run, summary.run_id)
+                assert run is not None and run.parameters["remove_share"] == share
+                for t in session.scalars(select(Transition)):
+                    end = session.get(Configuration, t.to_configuration_id)
+                    start = session.get(Configuration, t.from_configuration_id)
+                    assert start is not None and end is not None and t.to_cross == end.cross != t.from_cross
+                    falling += t.to_cross < t.from_cross
+                    sim.set_state(start.q_array())
+                    assert sim.apply(Curve(t.link, t.z_max_m, t.x_m, t.y_m)).ok
+                    assert sim.p_data().cross == t.to_cross and np.array_equal(sim.state(), end.q_array())
+        assert (falling > 0) == (share > 0), (seed, falling)

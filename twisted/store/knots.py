@@ -41,6 +41,8 @@ __all__ = [
     "KNOT_VIEW_NAMES",
     "KnotStateSet",
     "cached_states_by_type",
+    "keep_states_by_type",
+    "load_states_by_type",
     "prime_goal_spec",
     "prime_knot_goal",
     "Tightening",
@@ -278,12 +280,10 @@ def _unpack(blob: bytes) -> tuple[Any, ...]:
     return tuple(parse_p_data(p) for p in json.loads(zlib.decompress(blob)))
 
 
-def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ...]]:
-    """:func:`twisted.knots.states_by_type` through the store: read when a process before computed it
-    (same move set), else computed and stored; either way handed to :mod:`twisted.knots` for this process."""
-    import time
-
-    from twisted.knots import prime_states_by_type, states_by_type
+def load_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ...]] | None:
+    """The sets of :func:`twisted.knots.states_by_type` a process before kept in the store (same move
+    set), handed to :mod:`twisted.knots` for this process; None when none are kept."""
+    from twisted.knots import prime_states_by_type
     from twisted.moves import MOVES_VERSION
 
     with store.session() as session:
@@ -292,10 +292,21 @@ def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ..
                 KnotStateSet.crossings == crossings, KnotStateSet.moves_version == MOVES_VERSION
             )
         ).all()
-    if rows:
-        by_type = {knot_type: _unpack(blob) for knot_type, blob in rows}
-        prime_states_by_type(crossings, by_type)
-        return by_type
+    if not rows:
+        return None
+    by_type = {knot_type: _unpack(blob) for knot_type, blob in rows}
+    prime_states_by_type(crossings, by_type)
+    return by_type
+
+
+def keep_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ...]]:
+    """:func:`twisted.knots.states_by_type` (computed in this process unless primed) kept in the store
+    unless it already holds them (another process may have stored them meanwhile)."""
+    import time
+
+    from twisted.knots import states_by_type
+    from twisted.moves import MOVES_VERSION
+
     t0 = time.perf_counter()
     by_type = states_by_type(crossings)
     compute_s = time.perf_counter() - t0
@@ -305,7 +316,7 @@ def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ..
                 KnotStateSet.crossings == crossings, KnotStateSet.moves_version == MOVES_VERSION
             )
         )
-        if not exists:  # another process may have stored them meanwhile
+        if not exists:
             for knot_type, states in sorted(by_type.items()):
                 session.add(
                     KnotStateSet(
@@ -317,8 +328,14 @@ def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ..
                         compute_s=compute_s,
                     )
                 )
-    prime_states_by_type(crossings, by_type)
     return by_type
+
+
+def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ...]]:
+    """:func:`twisted.knots.states_by_type` through the store: read when a process before computed it
+    (same move set), else computed and stored; either way handed to :mod:`twisted.knots` for this process."""
+    by_type = load_states_by_type(store, crossings)
+    return by_type if by_type is not None else keep_states_by_type(store, crossings)
 
 
 # Crossing counts whose enumeration is worth keeping (below 5 it takes seconds)
