@@ -10,7 +10,8 @@
     python bench/untie.py retie --db sqlite:////work/scratch34/bench.db --knot figure-eight \\
         --seeds 0 1 --timeout 300
 
-``make`` ties the overhand knot (``--knot overhand --tighten``, one run per seed) and states drawn
+``make`` ties the overhand knot (``--knot overhand --tighten``, one run per seed), another knot
+(``--knot figure-eight --knot-seeds 0 1``, likewise) and states drawn
 at random (seeded) among all states of the given crossing counts (``--states 4 5``: one 4- and one
 5-crossing state), each a plan run with the shipped model. ``run`` starts an untie search
 (:func:`twisted.planner.start_search` with ``from_run``, goal ``[]``) from every solved run that is
@@ -54,9 +55,9 @@ def _search(
 
 def make(args: argparse.Namespace) -> None:
     rng = np.random.default_rng(args.draw_seed)
+    tied = [("overhand", s) for s in args.overhand_seeds] + [(args.knot, s) for s in args.knot_seeds]
     goals: list[tuple[str, Any, PlannerOptions]] = [
-        (f"overhand seed {s}", knot_goal("overhand"), PlannerOptions(seed=s, tighten=True))
-        for s in args.overhand_seeds
+        (f"{knot} seed {s}", knot_goal(knot), PlannerOptions(seed=s, tighten=True)) for knot, s in tied
     ]
     if args.states:
         layers = enumerate_states(max(args.states))
@@ -165,6 +166,8 @@ def main() -> None:
     sub = ap.add_subparsers(dest="command", required=True)
     m = sub.add_parser("make", help="tie ropes into the store")
     m.add_argument("--overhand-seeds", type=int, nargs="*", default=[0, 1])
+    m.add_argument("--knot", default="figure-eight", help="another knot to tie (with --knot-seeds)")
+    m.add_argument("--knot-seeds", type=int, nargs="*", default=[])
     m.add_argument("--states", type=int, nargs="*", default=[], help="crossing counts of drawn states")
     m.add_argument("--draw-seed", type=int, default=0)
     for name in ("run", "retie"):
