@@ -171,9 +171,9 @@ numbers = st.one_of(
 )
 
 
-@pytest.fixture
-def stubbed(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """Commands stop where they would open the store or start long work; reaching it counts as exit 0."""
+def stub_commands(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Commands stop where they would open the store or start long work; reaching it counts as exit 0
+    (shared with test_fuzz_cli)."""
     import twisted.knots
     import twisted.moves
     import twisted.store
@@ -186,6 +186,11 @@ def stubbed(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     monkeypatch.setattr(typer.testing, "_get_command", lambda _app, _built=COMMAND: _built)
     monkeypatch.setattr(twisted.knots, "states_tying", lambda *a, **k: [])
     monkeypatch.setattr(twisted.moves, "enumerate_states", lambda *a, **k: {})
+
+
+@pytest.fixture
+def stubbed(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    stub_commands(monkeypatch)
     yield
 
 

@@ -16,13 +16,10 @@ Hypothesis is derandomised (the same examples every run); ``TWISTED_FUZZ_EXAMPLE
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
-import os
 import pickle
 import shutil
-import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -32,34 +29,17 @@ import torch
 import typer
 import typer.main
 import typer.testing
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import example, given
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.test_fuzz import _digest, _fuzz, stub_commands
 from twisted.model.registry import default_model_path
 from twisted.store import open_store
 
-SCALE = float(os.environ.get("TWISTED_FUZZ_EXAMPLES", "1"))
 runner = CliRunner()
 ONE = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
-
-
-def _fuzz(examples: int) -> Any:
-    return settings(
-        max_examples=max(1, int(examples * SCALE)),
-        deadline=None,
-        derandomize=True,
-        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-    )
-
-
-def _digest(path: Path) -> str:
-    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
-    try:
-        return hashlib.sha256("\n".join(conn.iterdump()).encode()).hexdigest()
-    finally:
-        conn.close()
 
 
 def _clean_exit(result: Any, allowed: tuple[int, ...], what: str) -> None:
@@ -127,23 +107,12 @@ def _commands() -> list[tuple[str, list[tuple[str, bool]]]]:
 
 
 COMMANDS = _commands()
-TREE = typer.main.get_command(app)
 
 
 @pytest.fixture
 def stubbed(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Iterator[None]:
     """The store is never opened (reaching it counts as exit 0); the work folder is a temporary one."""
-    import twisted.knots
-    import twisted.moves
-    import twisted.store
-
-    def opened(*args: Any, **kwargs: Any) -> Any:
-        raise typer.Exit(0)
-
-    monkeypatch.setattr(twisted.store, "open_store", opened)
-    monkeypatch.setattr(typer.testing, "_get_command", lambda _app, _built=TREE: _built)
-    monkeypatch.setattr(twisted.knots, "states_tying", lambda *a, **k: [])
-    monkeypatch.setattr(twisted.moves, "enumerate_states", lambda *a, **k: {})
+    stub_commands(monkeypatch)
     monkeypatch.chdir(tmp_path)
     yield
 
