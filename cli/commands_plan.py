@@ -369,16 +369,10 @@ def _load_knot_states(ctx: typer.Context, request: _Request) -> int | None:
     existing database has them (nothing is created before the goal is checked: a new database gets
     them once the run's store is open); the crossing count whose sets the run's store should keep, or
     None. A name that is no knot is left to the goal's own check (exit 2 before anything is opened)."""
-    from twisted.knots import KnotNameError, least_crossings
-    from twisted.store.knots import CACHED_CROSSINGS, load_states_by_type
+    from twisted.store.knots import kept_crossings, load_states_by_type
 
-    if request.knot is None:
-        return None
-    try:
-        count = request.crossings if request.crossings is not None else least_crossings(request.knot)
-    except KnotNameError:
-        return None
-    if count not in CACHED_CROSSINGS:
+    count = kept_crossings(request.knot, request.crossings)
+    if count is None:
         return None
     if store_exists(ctx):
         with open_db(ctx, create=False) as store:

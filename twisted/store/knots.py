@@ -42,6 +42,7 @@ __all__ = [
     "KnotStateSet",
     "cached_states_by_type",
     "keep_states_by_type",
+    "kept_crossings",
     "load_states_by_type",
     "prime_goal_spec",
     "prime_knot_goal",
@@ -342,18 +343,25 @@ def cached_states_by_type(store: Any, crossings: int) -> dict[str, tuple[Any, ..
 CACHED_CROSSINGS = (5,)
 
 
-def prime_knot_goal(store: Any, knot: str | None, crossings: int | None = None) -> None:
-    """Before a knot goal is built: read (or make and keep) the sets it enumerates. Does nothing for a
-    name that is no knot (the goal's own check reports it) or a count that is not enumerated."""
+def kept_crossings(knot: str | None, crossings: int | None = None) -> int | None:
+    """The crossing count whose state sets a goal of ``knot`` enumerates and the store keeps (None: a
+    name that is no knot, which the goal's own check reports, or a count not worth keeping)."""
     from twisted.knots import KnotNameError, least_crossings
 
     if knot is None:
-        return
+        return None
     try:
         count = crossings if crossings is not None else least_crossings(knot)
     except KnotNameError:
-        return
-    if count in CACHED_CROSSINGS:
+        return None
+    return count if count in CACHED_CROSSINGS else None
+
+
+def prime_knot_goal(store: Any, knot: str | None, crossings: int | None = None) -> None:
+    """Before a knot goal is built: read (or make and keep) the sets it enumerates. Does nothing for a
+    name that is no knot (the goal's own check reports it) or a count that is not enumerated."""
+    count = kept_crossings(knot, crossings)
+    if count is not None:
         cached_states_by_type(store, count)
 
 
