@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import shlex
-import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.table import Table
@@ -172,8 +171,23 @@ def problems_export(
         row = session.get(ProblemSet, record.id)
         assert row is not None
         seed, parameters = row.seed, dict(row.parameters or {})
-        drawn_by = (
-            command or (row.parameters or {}).get("command") or " ".join(shlex.quote(a) for a in sys.argv)
-        )
+        drawn_by = command or parameters.get("command") or _make_command(record.name, seed, parameters)
+        if drawn_by is None:
+            fail(f"the set {set_name!r} does not say how it was drawn: give --command")
     out.write_text(goal_set_file(record, kind=kind, seed=seed, command=drawn_by, parameters=parameters))
     console.print(f"wrote {out} ({len(record.problems)} goals, seed {seed})")
+
+
+def _make_command(name: str, seed: int | None, parameters: dict[str, Any]) -> str | None:
+    """The ``twisted problems make`` command that draws set ``name`` again (its kind and size are in its
+    parameters, its prefix in its name), or None when it was not drawn by ``problems make``."""
+    kind = parameters.get("kind")
+    if not isinstance(kind, str) or not name.endswith(kind) or seed is None:
+        return None
+    words = ["twisted", "problems", "make", "--set", kind, "--seed", str(seed)]
+    if name != kind:
+        words += ["--prefix", name[: -len(kind)]]
+    per_set = parameters.get("per_set")
+    if per_set not in (None, 10):
+        words += ["--per-set", str(per_set)]
+    return " ".join(shlex.quote(w) for w in words)

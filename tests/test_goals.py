@@ -345,6 +345,8 @@ def test_goal_set_files_are_imported_with_their_seed(sqlite_url: str, tmp_path: 
     assert code == 0, out
     text = target.read_text()
     assert json.loads(text)["seed"] == 5
+    # the file says the command that draws the set again, not the export that wrote it
+    assert json.loads(text)["command"] == "twisted problems make --set u4 --seed 5 --prefix t- --per-set 3"
     other = f"sqlite:///{tmp_path / 'other.db'}"
     code, out = _cli(other, "problems", "import", str(target))
     assert code == 0, out

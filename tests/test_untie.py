@@ -159,11 +159,12 @@ def test_plan_from_run_checks_its_inputs(tied_db: Path, tmp_path: Path) -> None:
 def test_collect_keeps_removing_transitions_only_when_asked(tmp_path: Path, share: float) -> None:
     """With --remove-share 1 every curve that removes crossings is kept too, labelled by the state it
     reached, and replays; with 0 (the default) none is, as before. Not one hand-picked seed: with share
-    1, seeds 0-2 each keep some (9, 13 and 13 of 24 at e85b54d's collector); with 0, none can."""
+    1, seeds 0-2 each keep some (9, 13 and 13 of 24 at e85b54d's collector); with 0, none can.
+    The time limit only matters on a loaded machine: the collection stops at max_kept."""
     sim = RopeSim()
     for seed in (0, 1, 2) if share else (0,):
         with open_store(f"sqlite:///{tmp_path / f'seed{seed}.db'}") as store:
-            options = dict(hours=0.05, workers=1, seed=seed, max_kept=24, batch_size=4, remove_share=share)
+            options = dict(hours=0.25, workers=1, seed=seed, max_kept=24, batch_size=4, remove_share=share)
             summary = collect(store, CollectOptions(**options))
             assert summary.status == "finished" and summary.kept >= 24
             falling = 0

@@ -114,6 +114,15 @@ class PreparedEval:
         return EvalSummary(eval_run_id, self.set_name, self.label, self.total, done), tasks
 
 
+def _pull_test_required(parameters: Mapping[str, Any]) -> bool:
+    """Whether a set's parameters (made by ``problems make``, or the header of an imported goal-set file
+    with the drawn set's parameters inside) say its goals count only when the rope pulls tight."""
+    inner = parameters.get("parameters")
+    return parameters.get("pull_test") == "required" or (
+        isinstance(inner, Mapping) and inner.get("pull_test") == "required"
+    )
+
+
 def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> PreparedEval:
     """Check an evaluation's inputs, pick its label, load its model id and problem set.
 
@@ -167,6 +176,8 @@ def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> Pre
         record = load_problem_set(session, set_name)
         if record is None:
             raise EvalInputError(f"no problem set {set_name!r}: see `twisted problems list`")
+        if _pull_test_required(record.parameters or {}) and not options.get("tighten"):
+            raise EvalInputError(f"set {set_name!r} requires the pull test: add --tighten")
         check_label_options(session, record, label, {**options, "planner": planner})
     return PreparedEval(
         set_name=set_name,

@@ -147,7 +147,17 @@ class PlannerOptions:
         "Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a little, "
         "pulled apart) ties the goal's knot; a reached state that fails the pull test does not end the "
         "search. Each pull test is stored with the run.",
-        commands=("plan",),
+        commands=EVALUATED,
+        before=False,
+        before_in_evals=True,
+    )
+    both_ways: bool = option(
+        False,
+        "Plan with moves that remove crossings too (twisted.planner.untie; implied by a start beyond the "
+        "goal, see docs/untie.md).",
+        commands=("eval",),
+        before=False,
+        before_in_evals=True,
     )
 
     def validate(self) -> None:
