@@ -587,6 +587,26 @@ def test_retie_plans_mix_removing_and_adding_moves() -> None:
         _check_both_ways_plan(plan, GOAL_3, {two})
 
 
+def test_granny_to_square_plans_meet_in_the_middle() -> None:
+    """Between 6-crossing states the plans are found from both ends at once: a granny (two right-handed
+    overhands in a row) to any square state is 6 moves (the rope end pulled back out of a crossing of the
+    second overhand and laid across again the other way, three times), and every plan found is a valid
+    path of that length through states of at most 6 crossings, each a different one."""
+    from twisted.goals import knot_goal
+
+    granny = parse_p_data(
+        '[[1,"O",4,"+"],[2,"U",5,"+"],[3,"O",6,"+"],[4,"U",1,"+"],[5,"O",2,"+"],[6,"U",3,"+"],'
+        '[7,"U",10,"+"],[8,"O",11,"+"],[9,"U",12,"+"],[10,"O",7,"+"],[11,"U",8,"+"],[12,"O",9,"+"]]'
+    )
+    square = set(knot_goal("square").states)
+    found = plans_both_ways(granny, square, limit=30)
+    assert len(found) == 30 and {plan.length for plan in found} == {6}
+    assert len({tuple(plan.states) for plan in found}) == 30
+    for plan in found:
+        _check_both_ways_plan(plan, granny, square)
+        assert max(p.cross for p in plan.states) == 6
+
+
 def test_plans_both_ways_trivial_bounded_and_bad_input() -> None:
     assert plans_both_ways(CURL_RIGHT, [CURL_RIGHT]) == [Plan([CURL_RIGHT], [])]
     assert plans_both_ways(GOAL_3, [CURL_RIGHT], max_cross=2) == []  # the start is above the bound

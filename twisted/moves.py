@@ -66,6 +66,7 @@ moves into it (tests/test_moves.py). With both kinds the move graph has cycles; 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -100,7 +101,7 @@ DEFAULT_PLAN_LIMIT = 100
 MOVES_VERSION = 1
 # Bumped whenever the removing moves or plans_both_ways change; part of the plan cache's key of a
 # query answered both ways (twisted.store.plans), so adding-only answers stay valid when it moves.
-REMOVALS_VERSION = 1
+REMOVALS_VERSION = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -564,68 +565,73 @@ def plans_both_ways(
     work, and a plan may take some crossings out and add others. Only plans of the least length are
     returned (up to ``limit``, in a fixed order; each a different state sequence): unlike
     :func:`plans_to_any` the move graph has cycles here, so "all plans, shortest first" has no end.
-    The BFS deepens a bound ``D`` from the least length any plan can have and keeps only states from
-    which the goals can still be reached within ``D`` (a move changes the crossings by 1 or 2). An
-    unreachable goal gives ``[]``.
+
+    The moves both ways make an undirected graph (every removing move undoes an adding move, and the
+    reverse: tested on every state up to 4 crossings), so the search grows breadth-first layers from
+    the start and from the goals at once, always the side with the smaller frontier, until they meet.
+    Their meeting layer then holds one state of every shortest plan: the plans are the shortest paths
+    from the start to a meeting state followed by those from there to a goal. Searching from both ends
+    keeps a 6-move plan between 6-crossing states (a granny to a square) to two layers of about three
+    moves each, where one search from the start had to reach six. An unreachable goal gives ``[]``.
     """
     targets = _goal_set(start, goals, limit)
     if start in targets:
         return [Plan([start], [])]
     top_cross = max(start.cross, max(goal.cross for goal in targets)) if max_cross is None else max_cross
-    goal_crosses = sorted({goal.cross for goal in targets if goal.cross <= top_cross})
-    if not goal_crosses or start.cross > top_cross:
+    ends = sorted((goal for goal in targets if goal.cross <= top_cross), key=lambda p: p.key)
+    if not ends or start.cross > top_cross:
         return []
-
-    def least_moves(p: PData) -> int:
-        return min((abs(p.cross - c) + 1) // 2 for c in goal_crosses)
-
-    bound = least_moves(start)
+    ahead, behind = _Layers([start], top_cross), _Layers(ends, top_cross)
     while True:
-        layers = _bounded_layers(start, targets, top_cross, bound, least_moves)
-        if layers is None:
-            return []  # no state within the crossing bound is left unexplored: unreachable
-        found, parents = layers
-        if found:
+        grown, other = (ahead, behind) if len(ahead.frontier) <= len(behind.frontier) else (behind, ahead)
+        if not grown.grow():
+            return []  # one side ran dry before meeting the other: no plan within the crossing bound
+        meeting = sorted((v for v in grown.frontier if v in other.depth), key=lambda p: p.key)
+        if meeting:
             break
-        bound += 1
     out: list[Plan] = []
-    for goal in found:
-        for states, moves in _paths_back(goal, parents):
-            out.append(Plan(states, moves))
-            if len(out) >= limit:
-                return out
+    for middle in meeting:
+        for first_states, first_moves in _paths_back(middle, ahead.parents):
+            for rest in _paths_back(middle, behind.parents):
+                rest_states = rest[0][::-1]  # middle ... goal
+                moves = [*first_moves, *(_move(u, v, top_cross) for u, v in itertools.pairwise(rest_states))]
+                out.append(Plan([*first_states, *rest_states[1:]], moves))
+                if len(out) >= limit:
+                    return out
     return out
 
 
-def _bounded_layers(
-    start: PData, targets: frozenset[PData], top_cross: int, bound: int, least_moves: Any
-) -> tuple[list[PData], dict[PData, list[tuple[PData, Move]]]] | None:
-    """BFS layers from ``start`` up to depth ``bound``, keeping a state only when it can still reach a
-    goal in the moves left; the goals at depth ``bound`` and each state's parents on a shortest path.
-    None when the search ran dry before the bound (then no bound is enough)."""
-    depth = {start: 0}
-    parents: dict[PData, list[tuple[PData, Move]]] = {}
-    frontier = [start]
-    pruned = False
-    for d in range(bound):
-        next_frontier: list[PData] = []
-        for u in frontier:
-            for s in neighbours(u, top_cross):
+class _Layers:
+    """Breadth-first layers over the moves both ways from ``roots``, within ``top_cross`` crossings:
+    each state's depth, the states of the last layer and, per state, its neighbours one layer nearer
+    the roots (with the move from each of them, in the order :func:`neighbours` gives)."""
+
+    def __init__(self, roots: list[PData], top_cross: int) -> None:
+        self.top_cross = top_cross
+        self.depth = {root: 0 for root in roots}
+        self.frontier = list(roots)
+        self.parents: dict[PData, list[tuple[PData, Move]]] = {}
+
+    def grow(self) -> bool:
+        """Add the next layer; False when it is empty."""
+        d = self.depth[self.frontier[0]] + 1
+        layer: list[PData] = []
+        for u in self.frontier:
+            for s in neighbours(u, self.top_cross):
                 v = s.state
-                if d + 1 + least_moves(v) > bound:
-                    pruned = True
-                    continue
-                if v not in depth:
-                    depth[v] = d + 1
-                    next_frontier.append(v)
-                    parents[v] = []
-                if depth[v] == d + 1 and all(w != u for w, _ in parents[v]):
-                    parents[v].append((u, s.move))
-        frontier = [v for v in next_frontier if v not in targets or d + 1 == bound]
-        if not frontier:
-            return None if not pruned else ([], parents)
-    found = sorted((v for v in frontier if v in targets), key=lambda p: p.key)
-    return found, parents
+                if v not in self.depth:
+                    self.depth[v] = d
+                    layer.append(v)
+                    self.parents[v] = []
+                if self.depth[v] == d and all(w != u for w, _ in self.parents[v]):
+                    self.parents[v].append((u, s.move))
+        self.frontier = layer
+        return bool(layer)
+
+
+def _move(u: PData, v: PData, top_cross: int) -> Move:
+    """The first move that takes ``u`` to its neighbour ``v`` (as :func:`neighbours` lists them)."""
+    return next(s.move for s in neighbours(u, top_cross) if s.state == v)
 
 
 def _paths_back(
