@@ -81,12 +81,6 @@ def plan_command(
         "--from-run",
         help="Start from where solved run RUN_ID ended (its goal node); the search may remove crossings.",
     ),
-    both_ways: bool = typer.Option(
-        False,
-        "--both-ways",
-        help="Plan with moves that remove crossings too (implied by --from-run, by --goal '[]' and "
-        "wherever adding moves alone cannot reach the goal; see docs/untie.md).",
-    ),
     removal_curves: str | None = typer.Option(
         None, "--removal-curves", help="Curves of a removing step: random (default) | model."
     ),
@@ -132,7 +126,6 @@ def plan_command(
         workers=workers,
         as_json=as_json,
         from_run=from_run,
-        both_ways=both_ways,
         removal_curves=removal_curves,
         search_options=search_options,  # the planner options (twisted.planner.options), None: not given
     )
@@ -300,7 +293,7 @@ class _Request:
     search_options: dict[str, Any]
     as_json: bool = False
     from_run: int | None = None  # start where this solved run ended (twisted.planner.untie)
-    both_ways: bool = False
+    both_ways: bool = False  # `twisted untie`: plan both ways from the start (twisted.planner.untie)
     removal_curves: str | None = None
 
 

@@ -54,7 +54,8 @@ def problems_make(
             "--set",
             help="Only these sets (easy, medium, hard, unseen-3, 4, 5 from our data; u4, u5 uniform over "
             "all states of 4 and 5 crossings, u6 sampled near uniform, catalogue: every named knot up to 6 "
-            "crossings; docs/goals.md); repeatable. Default: the sets from our data.",
+            "crossings in each hand, knots: overhand, figure-eight, 5_1, 5_2, granny, square in either hand; "
+            "docs/goals.md); repeatable. Default: the sets from our data.",
         ),
     ] = None,
 ) -> None:

@@ -522,30 +522,28 @@ def test_results_under_one_label_must_share_the_planner_options(sqlite_url: str)
     ), removed.output
 
 
-def test_eval_takes_the_pull_test_and_removing_moves_and_a_catalogue_set_requires_the_pull_test(
-    sqlite_url: str,
-) -> None:
-    """``eval --tighten`` and ``eval --both-ways`` reach the planner runs and are options the label
-    keeps; a set whose goals count only when the rope pulls tight is refused without --tighten."""
-    one = enumerate_states(1)[1][0]
+def test_eval_takes_the_pull_test_and_a_knot_set_requires_it(sqlite_url: str) -> None:
+    """``eval --tighten`` reaches the planner runs and is an option the label keeps; a set whose goals
+    count only when the rope pulls tight (``problems make --set catalogue`` / ``knots``) is refused
+    without it, before anything is stored."""
+    from twisted.goals import knot_goal
+
+    overhand = knot_goal("overhand")
     with open_store(sqlite_url) as store, store.session(write=True) as session:
-        save_problem_set(session, "a", [ProblemRecord(None, 0, one, 0, "imported")], source="imported")
-        knots = [ProblemRecord(None, 0, one, 0, "imported")]
-        save_problem_set(session, "knots", knots, source="imported", parameters={"pull_test": "required"})
-    args = ["--db", sqlite_url, "eval", "--planner", "random-low", "--timeout", "3", "--parallel", "1"]
+        knots = [ProblemRecord(None, 0, overhand.representative, 0, "knots", spec=overhand.spec)]
+        save_problem_set(session, "knots", knots, source="made", parameters={"pull_test": "required"})
+    args = ["--db", sqlite_url, "eval", "--set", "knots", "--planner", "random-low", "--timeout", "3"]
+    args += ["--parallel", "1", "--label", "t"]
     runner = CliRunner()
-    refused = runner.invoke(app, [*args, "--set", "knots"])
+    refused = runner.invoke(app, args)
     assert refused.exit_code == 2 and "add --tighten" in " ".join(refused.output.split()), refused.output
     with open_store(sqlite_url) as store, store.session() as session:
         assert session.scalar(select(EvalRun)) is None  # refused before anything was stored
-    both = runner.invoke(app, [*args, "--set", "a", "--both-ways", "--label", "bw"])
-    assert both.exit_code == 0, both.output
-    plain = runner.invoke(app, [*args, "--set", "a", "--label", "bw"])  # the label keeps --both-ways
-    assert plain.exit_code == 2 and "both_ways" in " ".join(plain.output.split()), plain.output
+    pulled = runner.invoke(app, [*args, "--tighten"])
+    assert pulled.exit_code == 0, pulled.output
     with open_store(sqlite_url) as store, store.session() as session:
-        run = session.scalars(select(EvalRun).where(EvalRun.planner == "bw")).one()
-        assert run.parameters["both_ways"] is True and run.parameters["tighten"] is False
-        result = session.scalars(select(EvalResult).where(EvalResult.planner == "bw")).one()
+        run = session.scalars(select(EvalRun)).one()
+        assert run.parameters["tighten"] is True
+        result = session.scalars(select(EvalResult)).one()
         plan_run = session.get(Run, result.plan_run_id)
-        assert plan_run is not None and plan_run.parameters["both_ways"] is True
-        assert plan_run.parameters["removal_curves"] == "random"
+        assert plan_run is not None and plan_run.parameters["tighten"] is True

@@ -374,6 +374,20 @@ def test_the_committed_goal_sets_import() -> None:
         assert goals
 
 
+def test_the_knots_set_asks_for_each_named_knot_in_either_hand_with_the_pull_test() -> None:
+    """`problems make --set knots`: the six names `plan --knot` takes, each goal any state of either hand
+    (after the committed sets above, so the 5-crossing states are enumerated once in this process)."""
+    from twisted.experiments.problems import KNOT_NAMES, _named_parameters, draw_named_set
+    from twisted.experiments.runner import _pull_test_required
+
+    drawn = draw_named_set("knots", 10, seed=3)
+    assert [r.spec for r in drawn] == [
+        f"knot:{name}@{c}" for name, c in zip(KNOT_NAMES, (3, 4, 5, 5, 6, 6), strict=True)
+    ]
+    assert [r.goal_key for r in drawn] == [r.goal_key for r in draw_named_set("knots", 2, seed=0)]
+    assert _pull_test_required(_named_parameters("knots", 10))
+
+
 def test_knot_state_sets_are_kept_in_the_store(sqlite_url: str) -> None:
     """Computed once, read back by the next process: the same sets (3 crossings keep the test short)."""
     from twisted.knots import prime_states_by_type, states_by_type, states_tying

@@ -80,10 +80,13 @@ FOUR_SET = "4"
 FIVE_SET = "5"
 ALL_MADE_SETS = (*DIFFICULTY_SETS, UNSEEN_SET, FOUR_SET, FIVE_SET)
 # Sets drawn the way people name goals (not from our data): crossing count per uniform set
-NAMED_SETS = {"u4": 4, "u5": 5, "u6": 6, "catalogue": 0}
+NAMED_SETS = {"u4": 4, "u5": 5, "u6": 6, "catalogue": 0, "knots": 0}
 MAKEABLE_SETS = (*ALL_MADE_SETS, *NAMED_SETS)
 # The catalogue set: every named knot up to 6 crossings, each chirality apart (square is its own mirror)
 CATALOGUE_KNOTS = ("3_1+", "3_1-", "4_1", "5_1+", "5_1-", "5_2+", "5_2-", "granny+", "granny-", "square")
+# The knots set: the catalogue's knots by the names a person asks for (`twisted plan --knot NAME`), each
+# reached in either hand
+KNOT_NAMES = ("overhand", "figure-eight", "5_1", "5_2", "granny", "square")
 # Marks a goal file that carries one set with how it was drawn (``goal_set_file``)
 GOAL_SET_FORMAT = "twisted-goal-set/1"
 
@@ -210,7 +213,7 @@ def draw_named_set(
     """The goals of a named set (:data:`NAMED_SETS`), drawn by ``default_rng([seed, n])``; pure.
 
     Uniform sets list their states in draw order; ``exclude`` holds goal keys never drawn (e.g. the
-    goals of evaluation sets). The catalogue ignores ``per_set`` and ``seed``.
+    goals of evaluation sets). The catalogue and the knots set ignore ``per_set`` and ``seed``.
     """
     from twisted.experiments.goalsets import MAX_UNIFORM_ENUMERATED, sample_states, uniform_states
 
@@ -222,10 +225,8 @@ def draw_named_set(
     if n == 0:
         from twisted.goals import knot_goal
 
-        goals = [knot_goal(name) for name in CATALOGUE_KNOTS]
-        return [
-            ProblemRecord(None, i, g.representative, 0, "catalogue", spec=g.spec) for i, g in enumerate(goals)
-        ]
+        goals = [knot_goal(name) for name in (CATALOGUE_KNOTS if kind == "catalogue" else KNOT_NAMES)]
+        return [ProblemRecord(None, i, g.representative, 0, kind, spec=g.spec) for i, g in enumerate(goals)]
     rng = np.random.default_rng([seed, n])
     if n <= MAX_UNIFORM_ENUMERATED:
         states, tag = uniform_states(n, per_set, rng, exclude=exclude), f"uniform-{n}"
@@ -235,8 +236,9 @@ def draw_named_set(
 
 
 def _named_parameters(kind: str, per_set: int) -> dict[str, Any]:
-    if kind == "catalogue":
-        return {"kind": kind, "knots": list(CATALOGUE_KNOTS), "tighten": True, "pull_test": "required"}
+    if kind in ("catalogue", "knots"):
+        knots = CATALOGUE_KNOTS if kind == "catalogue" else KNOT_NAMES
+        return {"kind": kind, "knots": list(knots), "tighten": True, "pull_test": "required"}
     n = NAMED_SETS[kind]
     how = "uniform over the enumeration" if n <= 5 else "head-tree walks, importance-resampled toward uniform"
     return {"kind": kind, "per_set": per_set, "crossings": n, "draw": how}

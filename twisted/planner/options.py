@@ -151,14 +151,6 @@ class PlannerOptions:
         before=False,
         before_in_evals=True,
     )
-    both_ways: bool = option(
-        False,
-        "Plan with moves that remove crossings too (twisted.planner.untie; implied by a start beyond the "
-        "goal, see docs/untie.md).",
-        commands=("eval",),
-        before=False,
-        before_in_evals=True,
-    )
 
     def validate(self) -> None:
         """Raise ValueError naming the option that is out of range."""

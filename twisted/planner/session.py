@@ -13,7 +13,6 @@ Each search logs (``logging``, logger ``twisted.planner.session``) its start, ea
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -359,9 +358,8 @@ def start_search(
     rng = np.random.default_rng(options.seed)
     first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
     parameters = {**options.to_dict(), **(extra_parameters or {})}
-    both_ways = both_ways or options.both_ways or from_run is not None or both_ways_needed(root.p_data, goal)
+    both_ways = both_ways or from_run is not None or both_ways_needed(root.p_data, goal)
     if both_ways:
-        options = dataclasses.replace(options, both_ways=True)
         removal_curves = removal_curves or DEFAULT_REMOVAL_CURVES
         parameters.update(both_ways=True, removal_curves=removal_curves, from_run=from_run)
     recorder = _Logged(SearchRun.create(store, goal, parameters, root, first, start_configuration_id))
