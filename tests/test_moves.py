@@ -607,6 +607,22 @@ def test_granny_to_square_plans_meet_in_the_middle() -> None:
         assert max(p.cross for p in plan.states) == 6
 
 
+def test_plans_both_ways_do_not_depend_on_earlier_queries() -> None:
+    """The goals' layers are kept between queries; an answer (which plans, in which order, under a
+    limit) is the same with them cold or grown by queries from elsewhere."""
+    from twisted.goals import knot_goal
+    from twisted.moves import _goal_layers
+
+    figure_eight = list(knot_goal("figure-eight").states)
+    starts = [GOAL_3, *enumerate_states(3)[3][:40:8]]
+    answers = []
+    for order in (starts, starts[::-1]):
+        _goal_layers.cache_clear()
+        answers.append({p: plans_both_ways(p, figure_eight, limit=7) for p in order})
+    assert answers[0] == answers[1]
+    assert all(answers[0].values())
+
+
 def test_plans_both_ways_trivial_bounded_and_bad_input() -> None:
     assert plans_both_ways(CURL_RIGHT, [CURL_RIGHT]) == [Plan([CURL_RIGHT], [])]
     assert plans_both_ways(GOAL_3, [CURL_RIGHT], max_cross=2) == []  # the start is above the bound

@@ -101,7 +101,7 @@ DEFAULT_PLAN_LIMIT = 100
 MOVES_VERSION = 1
 # Bumped whenever the removing moves or plans_both_ways change; part of the plan cache's key of a
 # query answered both ways (twisted.store.plans), so adding-only answers stay valid when it moves.
-REMOVALS_VERSION = 2
+REMOVALS_VERSION = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -581,24 +581,66 @@ def plans_both_ways(
     ends = sorted((goal for goal in targets if goal.cross <= top_cross), key=lambda p: p.key)
     if not ends or start.cross > top_cross:
         return []
-    ahead, behind = _Layers([start], top_cross), _Layers(ends, top_cross)
-    while True:
+    ahead, behind = _Layers([start], top_cross), _goal_layers(tuple(ends), top_cross)
+    meeting = [start]  # when the goals' layers, kept from an earlier query, already hold the start
+    while start not in behind.depth:
         grown, other = (ahead, behind) if len(ahead.frontier) <= len(behind.frontier) else (behind, ahead)
         if not grown.grow():
             return []  # one side ran dry before meeting the other: no plan within the crossing bound
-        meeting = sorted((v for v in grown.frontier if v in other.depth), key=lambda p: p.key)
+        meeting = [v for v in grown.frontier if v in other.depth]
         if meeting:
             break
     out: list[Plan] = []
-    for middle in meeting:
-        for first_states, first_moves in _paths_back(middle, ahead.parents):
-            for rest in _paths_back(middle, behind.parents):
-                rest_states = rest[0][::-1]  # middle ... goal
-                moves = [*first_moves, *(_move(u, v, top_cross) for u, v in itertools.pairwise(rest_states))]
-                out.append(Plan([*first_states, *rest_states[1:]], moves))
-                if len(out) >= limit:
-                    return out
+    for states in _shortest_paths(start, meeting, ahead, behind):
+        out.append(Plan(states, [_move(u, v, top_cross) for u, v in itertools.pairwise(states)]))
+        if len(out) >= limit:
+            break
     return out
+
+
+def _shortest_paths(
+    start: PData, meeting: list[PData], ahead: _Layers, behind: _Layers
+) -> Iterator[list[PData]]:
+    """Every shortest path from ``start`` through a meeting state to a goal, in the order of their state
+    keys (the first state that differs decides): the same order whichever layer the two sides met in,
+    so an answer does not depend on what earlier queries grew."""
+    after: dict[PData, list[PData]] = {}  # each state's next states on shortest paths
+    todo, seen = list(meeting), set(meeting)
+    while todo:  # back from the meeting states to the start
+        v = todo.pop()
+        for u, _ in ahead.parents.get(v, ()):
+            after.setdefault(u, []).append(v)
+            if u not in seen:
+                seen.add(u)
+                todo.append(u)
+    todo = list(meeting)
+    while todo:  # on from the meeting states to the goals
+        v = todo.pop()
+        for w, _ in behind.parents.get(v, ()):
+            if v not in after or w not in after[v]:
+                after.setdefault(v, []).append(w)
+                todo.append(w)
+    for nexts in after.values():
+        nexts.sort(key=lambda p: p.key)
+
+    def walk(path: list[PData]) -> Iterator[list[PData]]:
+        nexts = after.get(path[-1])
+        if not nexts:
+            yield path
+            return
+        for v in nexts:
+            yield from walk([*path, v])
+
+    yield from walk([start])
+
+
+@lru_cache(maxsize=8)
+def _goal_layers(ends: tuple[PData, ...], top_cross: int) -> _Layers:
+    """The layers grown from a goal set, kept between queries: a search asks for plans to the same goals
+    from every state it reaches, and the goals' side is where the layers are widest. Each query checks
+    every layer it grows against the whole of the other side, so layers grown by an earlier query keep
+    the plans exact (the meeting layer still holds one state of every shortest plan)."""
+    return _Layers(list(ends), top_cross)
 
 
 class _Layers:
@@ -614,6 +656,8 @@ class _Layers:
 
     def grow(self) -> bool:
         """Add the next layer; False when it is empty."""
+        if not self.frontier:
+            return False
         d = self.depth[self.frontier[0]] + 1
         layer: list[PData] = []
         for u in self.frontier:
@@ -632,18 +676,6 @@ class _Layers:
 def _move(u: PData, v: PData, top_cross: int) -> Move:
     """The first move that takes ``u`` to its neighbour ``v`` (as :func:`neighbours` lists them)."""
     return next(s.move for s in neighbours(u, top_cross) if s.state == v)
-
-
-def _paths_back(
-    v: PData, parents: dict[PData, list[tuple[PData, Move]]]
-) -> Iterator[tuple[list[PData], list[Move]]]:
-    """Every shortest path from the BFS root to ``v`` (depth-first over the parents, fixed order)."""
-    if v not in parents:
-        yield [v], []
-        return
-    for u, move in parents[v]:
-        for states, moves in _paths_back(u, parents):
-            yield [*states, v], [*moves, move]
 
 
 def _paths(
