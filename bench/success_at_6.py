@@ -2,11 +2,16 @@
 
     python bench/success_at_6.py --db sqlite:///collect.db [--model-id N] [--per-step 60] [--workers 2]
         [--steps 0->1 1->2 2->3 3->4 4->5 5->6] [--compare-default]
+    python bench/success_at_6.py --db sqlite:///final.db --tree-sets final-u4 final-u5 \
+        --model-file new.pt --compare-default --steps 3->4 4->5 5->6 --explained
 
 For every held-out transition (the validation side of the model's split, plus transitions newer
 than its data snapshot) 6 curves are sampled from the model for (q, next state) and 6 uniform
 random curves are drawn; each is simulated from q (SimPool); the transition is solved when any
-result has the next P-data. With --compare-default the shipped default model samples 6 curves for
+result has the next P-data. With --tree-sets the steps are instead the edges that add crossings of
+the planner trees of the stored runs towards those sets' goals (twisted.model.success.tree_steps;
+held out from any model trained elsewhere or with the sets held out).
+With --compare-default the shipped default model samples 6 curves for
 the same transitions too (its own column; the held-out set is the evaluated model's). Prints the
 table and, with --json, writes the figures.
 """
@@ -20,7 +25,7 @@ import time
 import numpy as np
 
 from twisted.model.registry import load_model
-from twisted.model.success import held_out_transitions, success_at_k
+from twisted.model.success import held_out_transitions, success_at_k, tree_steps
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 
@@ -50,6 +55,12 @@ def main() -> None:
     ap.add_argument(
         "--compare-default", action="store_true", help="also the shipped default model, same transitions"
     )
+    ap.add_argument(
+        "--tree-sets",
+        nargs="+",
+        default=None,
+        help="take the steps from the planner trees of the runs towards these problem sets' goals",
+    )
     ap.add_argument("--json", help="write the figures to this file")
     ap.add_argument("--oversample", type=int, default=None, help="override the model's sampling setting")
     ap.add_argument("--link-temperature", type=float, default=None, help="override the model's setting")
@@ -75,7 +86,9 @@ def main() -> None:
     if args.link_temperature is not None:
         model.link_temperature = args.link_temperature
     rng = np.random.default_rng(args.seed)
-    if args.explained:
+    if args.tree_sets:
+        held = tree_steps(store, args.tree_sets, args.per_step, rng, args.steps, explained=args.explained)
+    elif args.explained:
         from twisted.moves import explains
 
         # draw from every held-out transition, keep the explained ones, at most per_step of each step
@@ -89,11 +102,12 @@ def main() -> None:
             held += of_step
     else:
         held = held_out_transitions(store, model, args.per_step, rng, steps=args.steps, side=args.side)
+    source = f"tree steps of {', '.join(args.tree_sets)}" if args.tree_sets else f"{args.side} transitions"
     meta = model.metadata
     print(
         f"model {model.model_id if model.model_id is not None else 'default'}: trained on "
         f"{meta.get('data_size')} transitions, val metrics {meta.get('metrics', {}).get('val_loss')}; "
-        f"{len(held)} {args.side} transitions from {args.db}; sampling: oversample {model.oversample}, "
+        f"{len(held)} {source} from {args.db}; sampling: oversample {model.oversample}, "
         f"link temperature {model.link_temperature}"
     )
     t0 = time.perf_counter()
@@ -150,6 +164,7 @@ def main() -> None:
                     "db": args.db,
                     "model_id": model.model_id,
                     "k": args.k,
+                    "steps_from": source,
                     "rows": rows,
                     "metadata": {k: v for k, v in meta.items() if k != "parameters"},
                 },

@@ -37,12 +37,13 @@ from twisted.model.encoding import (
 )
 from twisted.model.network import InverseModel
 from twisted.model.registry import list_models, load_model
+from twisted.model.success import step_name, tree_steps
 from twisted.model.train import train
 from twisted.moves import Move, enumerate_states, explains, neighbours, successors
 from twisted.proposals import across_curve
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve, RopeSim
 from twisted.store import Configuration, open_store
-from twisted.store.experiments import ProblemRecord, save_problem_set
+from twisted.store.experiments import EvalResult, Problem, ProblemRecord, save_problem_set, start_eval_run
 from twisted.store.models import array_to_blob
 from twisted.store.queries import get_or_create_state, start_run
 from twisted.store.search import SearchNode, SearchRunRow
@@ -361,6 +362,69 @@ def test_held_out_sets_leave_out_the_trees_of_runs_towards_their_goals(sqlite_ur
     info = list_models(store)[0]
     n_search = info.metrics["n_train_search"] + info.metrics["n_val_search"]
     assert n_search == len(every - set(held))
+    store.close()
+
+
+def test_tree_steps_are_the_edges_of_the_runs_a_sets_evaluation_made(sqlite_url: str) -> None:
+    fill_store(sqlite_url, 10)
+    evaluated = add_tree(sqlite_url, None, seed=7, n_nodes=30, goal_p=TREE_GOAL)
+    other = add_tree(sqlite_url, None, seed=8, n_nodes=30, goal_p=TREE_GOAL)  # the same goal, no eval row
+    store = open_store(sqlite_url)
+    with store.session(write=True) as session:
+        set_id = save_problem_set(
+            session, "eval-t", [ProblemRecord(None, 0, TREE_GOAL, 1, "test")], source="made"
+        )
+        problem_id = session.query(Problem).filter_by(set_id=set_id).one().id
+        run_id = session.get_one(SearchNode, evaluated[0]).run_id
+        eval_run = start_eval_run(
+            session,
+            set_id=set_id,
+            planner="t",
+            timeout_s=1,
+            friction_scale=1,
+            seeds=[0],
+            workers=1,
+            parallel=1,
+        )
+        session.add(
+            EvalResult(
+                eval_run_id=eval_run,
+                set_id=set_id,
+                problem_id=problem_id,
+                planner="t",
+                goal_key=TREE_GOAL.key,
+                seed=0,
+                timeout_s=1,
+                friction_scale=1,
+                status="timeout",
+                solved=False,
+                plan_run_id=run_id,
+            )
+        )
+        nodes = {n.id: n for n in session.query(SearchNode).all()}
+    adding = {
+        i
+        for i in evaluated
+        if nodes[i].parent_id is not None and nodes[nodes[i].parent_id].cross < nodes[i].cross <= 6
+    }
+    names = {step_name(nodes[nodes[i].parent_id].cross, nodes[i].cross) for i in adding}
+    every = tree_steps(store, ["eval-t"], 10**6, np.random.default_rng(0), sorted(names))
+    assert adding and {t.transition_id for t in every} == adding and not adding & set(other)
+    for t in every:
+        parent = nodes[nodes[t.transition_id].parent_id]
+        assert np.array_equal(t.points, np.frombuffer(parent.points, "<f8").reshape(22, 3))
+        assert t.p_from.cross == parent.cross and t.p_to.cross == nodes[t.transition_id].cross
+    explained = tree_steps(store, ["eval-t"], 10**6, np.random.default_rng(0), sorted(names), explained=True)
+    assert {t.transition_id for t in explained} == {
+        t.transition_id for t in every if explains(t.p_from, t.p_to) is not None
+    }
+    # at most per_step of each step kind, drawn by the seed
+    few = tree_steps(store, ["eval-t"], 1, np.random.default_rng(0), sorted(names))
+    assert len(few) == len(names) and {t.step for t in few} == names
+    again = tree_steps(store, ["eval-t"], 1, np.random.default_rng(0), sorted(names))
+    assert [t.transition_id for t in few] == [t.transition_id for t in again]
+    with pytest.raises(ValueError, match="nope"):
+        tree_steps(store, ["nope"], 1, np.random.default_rng(0))
     store.close()
 
 

@@ -11,6 +11,12 @@ trained on. A model trained on another database (the shipped default) sees every
 held out; that is only true when the databases share no configurations, which callers must judge.
 Every 0->1 transition starts from the straight rope, one configuration, so 0->1 steps are either
 all trained on or all held out.
+
+:func:`tree_steps` takes the steps from planner trees instead: the edges of the trees of runs
+towards the goals of named problem sets that add crossings (the parent node's configuration, the
+state its child reached). They are held out from a model whose training left those sets out
+(``train --hold-out-set``, ``improve``) or never saw that database. Each was made at least once by
+the search that grew the tree, with its own model or a random expansion, which favours that model.
 """
 
 from __future__ import annotations
@@ -21,17 +27,21 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from sqlalchemy import select
+from sqlalchemy.orm import aliased
 
 from twisted.model.data import split_by_start
 from twisted.model.network import InverseModel
+from twisted.moves import explains
 from twisted.rope import MAX_CROSSINGS
 from twisted.sim import Curve, sample_curve
 from twisted.sim.pool import SimPool
 from twisted.store.db import Store
+from twisted.store.experiments import EvalResult, Problem, ProblemSet
 from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
+from twisted.store.search import SearchNode
 from twisted.topology import PData, parse_p_data
 
-__all__ = ["HeldOut", "StepResult", "held_out_transitions", "step_name", "success_at_k"]
+__all__ = ["HeldOut", "StepResult", "held_out_transitions", "step_name", "success_at_k", "tree_steps"]
 
 
 def step_name(from_cross: int, to_cross: int) -> str:
@@ -93,12 +103,7 @@ def held_out_transitions(
         held = ~held
     elif side == "all":
         held[:] = True
-    chosen: list[int] = []
-    for step in steps:
-        candidates = np.flatnonzero(held & (names == step))
-        if len(candidates) > per_step:
-            candidates = np.sort(rng.choice(candidates, per_step, replace=False))
-        chosen.extend(int(i) for i in candidates)
+    chosen = _draw_per_step(np.where(held, names, ""), steps, per_step, rng)
     out = []
     with store.session() as session:
         for i in chosen:
@@ -112,6 +117,76 @@ def held_out_transitions(
             out.append(
                 HeldOut(t.id, str(names[i]), c.q_array(), points, parse_p_data(p_from), parse_p_data(p_to))
             )
+    return out
+
+
+def _draw_per_step(
+    names: npt.NDArray[np.str_], steps: Sequence[str], per_step: int, rng: np.random.Generator
+) -> list[int]:
+    """Up to ``per_step`` indices of each step kind of ``names``, drawn uniformly, in index order."""
+    chosen: list[int] = []
+    for step in steps:
+        candidates = np.flatnonzero(names == step)
+        if len(candidates) > per_step:
+            candidates = np.sort(rng.choice(candidates, per_step, replace=False))
+        chosen.extend(int(i) for i in candidates)
+    return chosen
+
+
+def tree_steps(
+    store: Store,
+    set_names: Sequence[str],
+    per_step: int,
+    rng: np.random.Generator,
+    steps: Sequence[str] = ("3->4", "4->5", "5->6"),
+    max_cross: int = MAX_CROSSINGS,
+    explained: bool = False,
+) -> list[HeldOut]:
+    """Up to ``per_step`` tree edges of each step kind, drawn uniformly from the trees of the stored
+    runs towards the goals of ``set_names`` (the runs their evaluations made); see the module doc.
+    ``explained``: only edges one high-level move explains (the steps a plan asks the model for).
+    ``transition_id`` is then the child node's id. Raises ValueError naming a set the store lacks."""
+    parent = aliased(SearchNode)
+    with store.session() as session:
+        known = set(session.scalars(select(ProblemSet.name).where(ProblemSet.name.in_(list(set_names)))))
+        missing = [n for n in set_names if n not in known]
+        if missing:
+            raise ValueError(f"no problem set named {', '.join(repr(n) for n in missing)} in the database")
+        runs = (
+            select(EvalResult.plan_run_id)
+            .join(Problem, Problem.id == EvalResult.problem_id)
+            .join(ProblemSet, ProblemSet.id == Problem.set_id)
+            .where(ProblemSet.name.in_(list(set_names)), EvalResult.plan_run_id.is_not(None))
+        )
+        rows = session.execute(
+            select(
+                SearchNode.id, parent.id, parent.cross, SearchNode.cross, parent.state_id, SearchNode.state_id
+            )
+            .join(parent, parent.id == SearchNode.parent_id)
+            .where(
+                SearchNode.run_id.in_(runs),
+                SearchNode.link.is_not(None),
+                SearchNode.cross > parent.cross,
+                SearchNode.cross <= max_cross,
+            )
+            .order_by(SearchNode.id)
+        ).all()
+        state_ids = sorted({r[4] for r in rows} | {r[5] for r in rows})
+        p_data = {
+            i: parse_p_data(p)
+            for i, p in session.execute(
+                select(TopologicalState.id, TopologicalState.p_data).where(TopologicalState.id.in_(state_ids))
+            )
+        }
+        if explained:
+            rows = [r for r in rows if explains(p_data[r[4]], p_data[r[5]]) is not None]
+        names = np.array([step_name(r[2], r[3]) for r in rows], dtype=np.str_)
+        out = []
+        for i in _draw_per_step(names, steps, per_step, rng):
+            child_id, parent_id, _, _, from_state, to_state = rows[i]
+            node = session.get_one(SearchNode, parent_id)
+            q, points = blob_to_array(node.q), blob_to_array(node.points, (-1, 3))
+            out.append(HeldOut(child_id, str(names[i]), q, points, p_data[from_state], p_data[to_state]))
     return out
 
 
