@@ -293,7 +293,6 @@ class _Request:
     search_options: dict[str, Any]
     as_json: bool = False
     from_run: int | None = None  # start where this solved run ended (twisted.planner.untie)
-    both_ways: bool = False  # `twisted untie`: plan both ways from the start (twisted.planner.untie)
     removal_curves: str | None = None
 
 
@@ -450,7 +449,6 @@ def _both_ways(request: _Request | None) -> dict[str, Any]:
         return {}
     return {
         "from_run": request.from_run,
-        "both_ways": request.both_ways,
         "removal_curves": request.removal_curves,
     }
 

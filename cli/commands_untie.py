@@ -61,7 +61,6 @@ def untie_command(
         workers=workers,
         as_json=as_json,
         from_run=None if resume else run_id,
-        both_ways=True,
         removal_curves=removal_curves,
         search_options={"planner": planner, "seed": seed},
     )

@@ -314,7 +314,6 @@ def start_search(
     progress: Callable[[Twisted], None] | None = None,
     extra_parameters: dict[str, Any] | None = None,
     from_run: int | None = None,
-    both_ways: bool = False,
     removal_curves: str | None = None,
 ) -> Twisted:
     """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope, a stored configuration
@@ -322,8 +321,8 @@ def start_search(
 
     ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id). The
     search also removes crossings (:class:`twisted.planner.untie.BothWays`, its removing steps' curves
-    from ``removal_curves``) when ``both_ways``, when it starts from a run's end, or when adding moves
-    alone cannot reach the goal from the start.
+    from ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
+    when adding moves alone cannot reach the goal from the start.
     """
     from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, BothWays, both_ways_needed, run_end
     from twisted.store.search import SearchRun
@@ -358,7 +357,7 @@ def start_search(
     rng = np.random.default_rng(options.seed)
     first = Checkpoint(0, 0.0, 0, dict(rng.bit_generator.state), {"state": {}, "plan": {}})
     parameters = {**options.to_dict(), **(extra_parameters or {})}
-    both_ways = both_ways or from_run is not None or both_ways_needed(root.p_data, goal)
+    both_ways = from_run is not None or both_ways_needed(root.p_data, goal)
     if both_ways:
         removal_curves = removal_curves or DEFAULT_REMOVAL_CURVES
         parameters.update(both_ways=True, removal_curves=removal_curves, from_run=from_run)
