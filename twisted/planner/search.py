@@ -48,7 +48,7 @@ import numpy as np
 
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
-from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
+from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts, kind_key
 from twisted.planner.tree import Node, SearchTree, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
@@ -77,8 +77,10 @@ __all__ = [
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
 # steps achieved] per state a follow_plan step started from (for analysis); [curves, curves
-# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
-STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
+# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler");
+# [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", read
+# by the val heuristic: twisted.planner.strategies.StepOdds)
+STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross", "kind")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 
 
@@ -385,6 +387,7 @@ class Twisted:
                 self._count("cross", script.name, scripted, sum(reached[:scripted]))
                 self._count("cross", "sampler", len(curves) - scripted, sum(reached[scripted:]))
             self._count("move", f"{move.kind}^-1" if move.remove else str(move.kind), 1, hit is not None)
+            self._count("kind", kind_key(move, current.p_data.cross), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
             self._count("step", current.p_data.key, 1, hit is not None)
             if self.goal_node is not None:
