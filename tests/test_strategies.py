@@ -451,7 +451,7 @@ def _digest_bench() -> Any:
     return module
 
 
-@pytest.mark.parametrize("case", ["ucb-room-off", "default"])
+@pytest.mark.parametrize("case", ["ucb-room-off", "default", "val"])
 def test_a_fixed_seed_search_is_the_one_recorded_before_the_planner_was_split_into_parts(case: str) -> None:
     bench = _digest_bench()
     recorded = json.loads(bench.RECORDED.read_text())[case]
