@@ -37,7 +37,6 @@ CASES: dict[str, tuple[str, dict[str, Any], int]] = {
     "default-2": (TWO, {"seed": 3}, 25),
     "rnd": (THREE, {"heuristic": "rnd", "seed": 2}, 20),
     "ucb": (THREE, {"heuristic": "ucb", "seed": 2}, 20),
-    "val": (THREE, {"heuristic": "val", "seed": 2}, 20),
     "knot-tighten": ("knot:overhand", {"seed": 0, "tighten": True}, 100),
     "random-low": (THREE, {"planner": "random-low", "seed": 4, "p_expand": 0.3, "k_expand": 6}, 20),
     "low-level-only": (THREE, {"planner": "low-level-only", "seed": 5}, 30),

@@ -279,21 +279,6 @@ def test_stop_and_resume_gives_the_same_tree_as_one_run(db_url: str) -> None:
             assert row is not None and row.outcome == "stopped"
 
 
-def test_a_val_search_resumed_chooses_as_the_uninterrupted_one(tmp_path: Path) -> None:
-    """val reads the kind statistics, which the checkpoint keeps: a resume makes the same choices."""
-    goal = check_goal(THREE_CROSSINGS)
-    options = PlannerOptions(planner="random-low", heuristic="val", seed=5, k=3, p_expand=0.3, k_expand=5)
-    with open_store(f"sqlite:///{tmp_path}/v.db") as store, SimPool(1) as pool:
-        whole = start_search(store, goal, options, pool)
-        whole.run(max_iterations=8)
-        first = start_search(store, goal, options, pool)
-        first.run(max_iterations=4)
-        rest = resume_search(store, first.run_id, pool).run(max_iterations=8)
-        assert rest.sim_calls == whole.sim_calls and rest.stats == whole.stats
-        assert sum(entry[0] for entry in rest.stats["kind"].values()) > 0
-        assert _tree_signature(store, whole.run_id) == _tree_signature(store, first.run_id)
-
-
 class _StopOnCall(RandomCurves):
     """Random curves that raise a stop request on their ``n``-th call: the pool wait right after it
     is cut short, inside an iteration, as a Ctrl-C would do."""

@@ -42,15 +42,11 @@ from twisted.planner.strategies import (
     ScriptedCross,
     StateMatch,
     StepCurves,
-    StepOdds,
     UcbPlans,
     UcbStates,
     UniformPlans,
     UniformStates,
-    ValuePlans,
-    ValueStates,
     default_parts,
-    kind_key,
 )
 from twisted.planner.tree import pair_key
 from twisted.topology import EMPTY, PData, parse_p_data, top
@@ -153,37 +149,6 @@ def test_ucb_states_prefer_depth_untried_then_the_state_whose_plans_advance() ->
     view.add(TWO.replace('"+"', '"-"'))
     fresh = view.tree.nodes[-1].p_data.key
     assert ucb.select(view, [*keys, fresh], rng) == fresh
-
-
-def test_step_odds_multiply_the_searchs_own_rates_per_move_kind_and_crossings() -> None:
-    view = _view(["[]", ONE])
-    view.stats["kind"] = {}
-    key, curl, over = _curl_and_cross(view)
-    odds = StepOdds()
-    assert odds.plan_odds(view, key) == [0.5, 0.5]  # nothing tried yet: 1/2 a step
-    view.stats["kind"]["R1@1"] = [98.0, 0.0]  # curls from 1 crossing: none of 98 made it
-    view.stats["kind"]["Cross@1"] = [8.0, 4.0]
-    assert odds.plan_odds(view, key) == pytest.approx([1 / 100, 5 / 10])
-    assert kind_key(curl.moves[0], 1) == "R1@1" and kind_key(over.moves[0], 1) == "Cross@1"
-    # a two-step plan: the product; the second step's kind counted from its own start's crossings
-    two = SimpleNamespace(states=[*curl.states, over.states[1]], moves=[curl.moves[0], over.moves[0]])
-    view.plans[key] = [curl, over, two]
-    view.stats["kind"]["Cross@2"] = [2.0, 0.0]
-    assert odds.plan_odds(view, key) == pytest.approx([1 / 100, 5 / 10, 1 / 100 * 1 / 4])
-    # with room: a curl's odds times the room of its state's best node, as UniformPlans weighs it
-    room = R1Room(8.0)
-    room._bounds = {1: np.array([0.0, 5.0, 7.0, 21.0])}  # segment 1: 2 links
-    assert StepOdds(room).plan_odds(view, key)[0] == pytest.approx(1 / 100 * (2 / 8) ** 2)
-    # plans and states follow the odds
-    plans_drawn = _shares(lambda rng: ValuePlans(odds).select(view, key, rng), [0, 1, 2])
-    w = np.array([1 / 100, 5 / 10, 1 / 400])
-    assert np.allclose(plans_drawn, w / w.sum(), atol=0.03), plans_drawn
-    keys = [EMPTY.key, key]
-    view.plans[EMPTY.key] = [SimpleNamespace(states=[EMPTY, *over.states], moves=[curl.moves[0]] * 2)]
-    view.stats["kind"]["R1@0"] = [0.0, 0.0]
-    states_drawn = _shares(lambda rng: ValueStates(odds).select(view, keys, rng), keys)
-    w = np.array([1 / 2 * 1 / 100, 5 / 10])  # each state: its best plan
-    assert np.allclose(states_drawn, w / w.sum(), atol=0.03), states_drawn
 
 
 # --- plan selection -----------------------------------------------------------------------------------
@@ -375,7 +340,6 @@ def test_the_pull_test_refuses_a_rope_that_comes_apart_and_records_only_when_ask
         (PlannerOptions(), CrossingStates, UniformPlans, True),
         (PlannerOptions(heuristic="rnd", r1_room=0.0), UniformStates, UniformPlans, False),
         (PlannerOptions(heuristic="ucb"), UcbStates, UcbPlans, True),
-        (PlannerOptions(heuristic="val"), ValueStates, ValuePlans, True),
     ],
 )
 def test_default_parts_follow_the_options(
@@ -451,7 +415,7 @@ def _digest_bench() -> Any:
     return module
 
 
-@pytest.mark.parametrize("case", ["ucb-room-off", "default", "val"])
+@pytest.mark.parametrize("case", ["ucb-room-off", "default"])
 def test_a_fixed_seed_search_is_the_one_recorded_before_the_planner_was_split_into_parts(case: str) -> None:
     bench = _digest_bench()
     recorded = json.loads(bench.RECORDED.read_text())[case]

@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 PLANNERS = ("twisted", "random-low", "low-level-only", "sac")
-HEURISTICS = ("rnd", "crs", "ucb", "val")
+HEURISTICS = ("rnd", "crs", "ucb")
 MAX_SEED = 2**63 - 1
 EVALUATED = ("plan", "eval")  # the options an evaluation sets (and its results must agree on)
 
@@ -95,10 +95,7 @@ class PlannerOptions:
         commands=EVALUATED + ("sensitivity",),
     )
     heuristic: str = option(
-        "crs",
-        "State choice: rnd | crs | ucb | val (the odds of the best plan, from the search's own steps).",
-        choices=HEURISTICS,
-        commands=EVALUATED + ("sensitivity",),
+        "crs", "State choice: rnd | crs | ucb.", choices=HEURISTICS, commands=EVALUATED + ("sensitivity",)
     )
     seed: int = option(0, "Seed of the search.", bounds=(0, MAX_SEED), commands=("plan",))
     k: int = option(

@@ -48,8 +48,8 @@ import numpy as np
 
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
-from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts, kind_key
-from twisted.planner.tree import Node, SearchTree, pair_key
+from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
+from twisted.planner.tree import Node, SearchTree, kind_key, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
@@ -78,8 +78,8 @@ __all__ = [
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
 # steps achieved] per state a follow_plan step started from (for analysis); [curves, curves
 # that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler");
-# [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", read
-# by the val heuristic: twisted.planner.strategies.StepOdds)
+# [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", for
+# analysis)
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross", "kind")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
 

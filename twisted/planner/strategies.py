@@ -8,8 +8,6 @@ Monte Carlo tree search takes its evaluator and child-selection function):
 - state selection (``StateSelection``): :class:`UniformStates` (rnd), :class:`CrossingStates` (crs,
   weight ``1 + Cross(s)``), :class:`UcbStates` (ucb, a bandit rewarded by the plan steps achieved);
 - plan selection (``PlanSelection``): :class:`UniformPlans` (rnd, crs), :class:`UcbPlans` (ucb);
-- val: :class:`ValueStates` and :class:`ValuePlans` weigh a state and a plan by the odds that the
-  plan's remaining steps all succeed, estimated by :class:`StepOdds` from this search's own steps;
 - node selection (``NodeSelection``): :class:`RetryWeightedNodes` (a node already asked for the plan's
   next state weighs ``retry_weight ** n``; 1 is the paper's uniform choice);
 - :class:`R1Room`: the room a node's segment leaves for an R1 curl, shared by the three selections
@@ -62,11 +60,7 @@ __all__ = [
     "UcbStates",
     "UniformPlans",
     "UniformStates",
-    "StepOdds",
-    "ValuePlans",
-    "ValueStates",
     "default_parts",
-    "kind_key",
 ]
 
 # the least node weight r1_room gives (a curl on a segment of a link or less almost never works)
@@ -199,71 +193,6 @@ class UcbStates:
         return best
 
 
-# --- val: the odds of a plan, learnt from the search's own steps ---------------------------------------
-
-
-def kind_key(move: Any, cross: int) -> str:
-    """The ``kind`` statistics key of a plan step: its move kind (``R1``, ``R2``, ``Cross``, a removing
-    move with ``^-1``) and the crossings of the state it starts from, e.g. ``"R1@3"``."""
-    return f"{move.kind}^-1@{cross}" if move.remove else f"{move.kind}@{cross}"
-
-
-class StepOdds:
-    """The odds that each remaining step of a plan succeeds, multiplied (DESIGN 8).
-
-    A step's odds are estimated from the steps of its kind this search has tried from states of the
-    same crossing count (the ``kind`` statistics): ``(achieved + 1) / (tried + 2)``, so an untried kind
-    counts 1/2 and the estimate follows the search's own record as it grows. A plan's odds are the
-    product over its steps, times the room of its first step when it is an R1 curl (:class:`R1Room`).
-    The move kinds of each state's plans are read once; the product is recomputed at every choice,
-    from statistics that the checkpoint keeps, so a resumed search chooses as the uninterrupted one.
-    """
-
-    def __init__(self, room: R1Room | None = None) -> None:
-        self.room = room
-        self._keys: dict[str, tuple[int, list[tuple[str, ...]]]] = {}  # state -> (plans, step keys per plan)
-
-    def plan_odds(self, search: SearchView, s: str) -> list[float]:
-        """Per plan of ``s``: the odds that all its steps succeed."""
-        plans = search.plans[s]
-        cached = self._keys.get(s)
-        if cached is None or cached[0] != id(plans):
-            keys = [
-                tuple(kind_key(m, u.cross) for m, u in zip(p.moves, p.states, strict=False)) for p in plans
-            ]
-            cached = self._keys[s] = (id(plans), keys)
-        table = search.stats["kind"]
-        memo: dict[str, float] = {}
-        odds = []
-        for plan_keys in cached[1]:
-            product = 1.0
-            for key in plan_keys:
-                p = memo.get(key)
-                if p is None:
-                    tried, achieved = table.get(key, (0.0, 0.0))
-                    p = memo[key] = (achieved + 1.0) / (tried + 2.0)
-                product *= p
-            odds.append(product)
-        if self.room is not None:
-            odds = [o * r for o, r in zip(odds, self.room.plan_rooms(search, s), strict=True)]
-        return odds
-
-    def forget(self) -> None:
-        self._keys.clear()
-
-
-class ValueStates:
-    """val: weight the odds of the state's best plan (:class:`StepOdds`): the chance that one attempt
-    from ``s`` reaches the goal, as far as this search's record tells."""
-
-    def __init__(self, odds: StepOdds) -> None:
-        self.odds = odds
-
-    def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
-        weights = [max(self.odds.plan_odds(search, key)) for key in candidates]
-        return candidates[_draw(weights, rng)]
-
-
 # --- SelectPlan ------------------------------------------------------------------------------------------
 
 
@@ -285,16 +214,6 @@ class UniformPlans:
         if min(rooms) == max(rooms):
             return int(rng.integers(len(search.plans[s])))
         return _draw(rooms, rng)
-
-
-class ValuePlans:
-    """val: each plan of ``s`` weighs its odds (:class:`StepOdds`)."""
-
-    def __init__(self, odds: StepOdds) -> None:
-        self.odds = odds
-
-    def select(self, search: SearchView, s: str, rng: np.random.Generator) -> int:
-        return _draw(self.odds.plan_odds(search, s), rng)
 
 
 class UcbPlans:
@@ -513,14 +432,11 @@ class Parts:
     expand_curves: BlindCurves  # RandomExpand's curves (and the low-level-only baseline's)
     goal_test: GoalTest
     room: R1Room | None = None  # the cache the selections share, forgotten on rollback
-    odds: StepOdds | None = None  # the val heuristic's cache of the plans' move kinds
 
     def forget(self, committed: int) -> None:
         """An unfinished iteration was rolled back to ``committed`` nodes: drop what it cached."""
         if self.room is not None:
             self.room.forget(committed)
-        if self.odds is not None:
-            self.odds.forget()
 
 
 def default_parts(
@@ -541,10 +457,7 @@ def default_parts(
     room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
     states: StateSelection
     plans: PlanSelection
-    odds = StepOdds(room) if options.heuristic == "val" else None
-    if odds is not None:
-        states, plans = ValueStates(odds), ValuePlans(odds)
-    elif options.heuristic == "ucb":
+    if options.heuristic == "ucb":
         states, plans = UcbStates(options.ucb_c), UcbPlans(options.ucb_c)
     elif options.heuristic == "rnd":
         states, plans = UniformStates(), UniformPlans(room)
@@ -560,5 +473,4 @@ def default_parts(
         expand_curves=random_curves,
         goal_test=goal_test,
         room=room,
-        odds=odds,
     )

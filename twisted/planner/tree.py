@@ -1,5 +1,6 @@
 """The search tree ``T`` of Algorithm 1: reached configurations (``Node``) in creation order, indexed by
-topological state (``SearchTree``); and the key of a (node, requested next state) pair."""
+topological state (``SearchTree``); and the statistics keys of a (node, requested next state) pair and
+of a plan step's move kind."""
 
 from __future__ import annotations
 
@@ -10,7 +11,14 @@ import numpy as np
 
 from twisted.topology import PData
 
-__all__ = ["Node", "SearchTree", "pair_key"]
+__all__ = ["Node", "SearchTree", "kind_key", "pair_key"]
+
+
+def kind_key(move: Any, cross: int) -> str:
+    """The key of a plan step in the ``kind`` statistics table: its move kind (``R1``, ``R2``,
+    ``Cross``, a removing move with ``^-1``) and the crossings of the state it starts from, e.g.
+    ``"R1@3"``."""
+    return f"{move.kind}^-1@{cross}" if move.remove else f"{move.kind}@{cross}"
 
 
 def pair_key(node_index: int, next_state_key: str) -> str:
