@@ -29,7 +29,7 @@ import numpy.typing as npt
 from sqlalchemy import select
 from sqlalchemy.orm import aliased
 
-from twisted.model.data import split_by_start
+from twisted.model.data import check_hold_out_sets, split_by_start
 from twisted.model.network import InverseModel
 from twisted.moves import explains
 from twisted.rope import MAX_CROSSINGS
@@ -145,13 +145,11 @@ def tree_steps(
     """Up to ``per_step`` tree edges of each step kind, drawn uniformly from the trees of the stored
     runs towards the goals of ``set_names`` (the runs their evaluations made); see the module doc.
     ``explained``: only edges one high-level move explains (the steps a plan asks the model for).
-    ``transition_id`` is then the child node's id. Raises ValueError naming a set the store lacks."""
+    ``transition_id`` is then the child node's id. Raises ``UnknownProblemSetError`` (a ValueError)
+    naming a set the store lacks."""
+    check_hold_out_sets(store, set_names)
     parent = aliased(SearchNode)
     with store.session() as session:
-        known = set(session.scalars(select(ProblemSet.name).where(ProblemSet.name.in_(list(set_names)))))
-        missing = [n for n in set_names if n not in known]
-        if missing:
-            raise ValueError(f"no problem set named {', '.join(repr(n) for n in missing)} in the database")
         runs = (
             select(EvalResult.plan_run_id)
             .join(Problem, Problem.id == EvalResult.problem_id)
