@@ -167,12 +167,16 @@ CURL_ON_LINE_M = 0.005
 
 
 class CurlMove(Protocol):
-    """What :func:`curl_move_curve` reads of a ``twisted.moves.Move`` of kind ``R1``."""
+    """What :func:`curl_move_curve` reads of a ``twisted.moves.Move`` of kind ``R1`` (read only)."""
 
-    kind: str
-    segment: int
-    over: str | None
-    sign: str | None
+    @property
+    def kind(self) -> str: ...
+    @property
+    def segment(self) -> int: ...
+    @property
+    def over(self) -> str | None: ...
+    @property
+    def sign(self) -> str | None: ...
 
 
 def _rope_at(pts: npt.NDArray[np.float64], s: npt.NDArray[np.float64]) -> tuple[np.ndarray, np.ndarray]:
