@@ -9,7 +9,9 @@ uniform draw of ``--draw`` edges per step, of which the R1 ones are kept, at mos
 For each, ``k`` curves of the scripted curl (``twisted.proposals.curl_move_curve``), ``k`` of the
 model (the shipped one unless ``--model-file``) and ``k`` uniform random curves are simulated from
 the parent's configuration; a step is solved by a proposer when one of its curves reaches the
-child's state. Prints success@k and the share of curves that reached it, per proposer and step.
+child's state. Prints success@k and the share of curves that reached it, per proposer and step, and
+success@k of the planner's mix: the first ``round(share * k)`` scripted curves and the first
+``k - round(share * k)`` of the model's (``--curl-move share``).
 
 Every edge was made once by the search that grew the tree (its model, its scripted Cross curve or a
 random expansion), which favours that search's proposers over the scripted curl.
@@ -58,6 +60,9 @@ def main() -> None:
     ap.add_argument("--per-step", type=int, default=120)
     ap.add_argument("--draw", type=int, default=2500, help="tree edges drawn per step before keeping R1 ones")
     ap.add_argument("--k", type=int, default=6)
+    ap.add_argument(
+        "--share", type=float, default=0.67, help="scripted share of the mix column (--curl-move)"
+    )
     ap.add_argument("--model-file", help="the model saved in this file (default: the shipped model)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
@@ -74,8 +79,10 @@ def main() -> None:
     by_step = r1_steps(args.db, args.tree_sets, args.steps, args.draw, args.per_step, rng)
     k, rows = args.k, []
     print(f"R1 tree steps of {', '.join(args.tree_sets)} in {args.db}; k = {k}")
+    scripted = int(round(args.share * k))
     heads = "".join(f" {p + '@' + str(k):>10s} {'per curve':>9s}" for p in PROPOSERS)
-    print(f"{'step':6s} {'n':>4s}{heads}")
+    mix = f"{'mix@' + str(k):>8s}  (mix: {scripted} scripted, {k - scripted} model)"
+    print(f"{'step':6s} {'n':>4s}{heads} {mix}")
     t0 = time.perf_counter()
     with SimPool(args.workers) as pool:
         for step in args.steps:
@@ -88,26 +95,31 @@ def main() -> None:
             results = pool.run(jobs)
             solved = dict.fromkeys(PROPOSERS, 0)
             curves = dict.fromkeys(PROPOSERS, 0)
+            mixed = 0
             for n, (t, _) in enumerate(items):
                 block = results[3 * k * n : 3 * k * (n + 1)]
+                hit = [r.ok and r.p_data == t.p_to for r in block]
                 for j, name in enumerate(PROPOSERS):
-                    hits = sum(r.ok and r.p_data == t.p_to for r in block[j * k : (j + 1) * k])
-                    solved[name] += hits > 0
-                    curves[name] += hits
+                    solved[name] += any(hit[j * k : (j + 1) * k])
+                    curves[name] += sum(hit[j * k : (j + 1) * k])
+                # the planner's mix (--curl-move S): round(S * k) scripted curves, the rest the model's
+                mixed += any(hit[:scripted]) or any(hit[k : 2 * k - scripted])
             n = max(len(items), 1)
-            row = {"step": step, "n": len(items)}
+            row: dict[str, object] = {"step": step, "n": len(items), "mix_at_k": mixed / n}
             for name in PROPOSERS:
                 row[f"{name}_at_k"], row[f"{name}_per_curve"] = solved[name] / n, curves[name] / (k * n)
             rows.append(row)
             print(
                 f"{step:6s} {len(items):4d}"
-                + "".join(f" {row[f'{p}_at_k']:10.3f} {row[f'{p}_per_curve']:9.3f}" for p in PROPOSERS),
+                + "".join(f" {row[f'{p}_at_k']:10.3f} {row[f'{p}_per_curve']:9.3f}" for p in PROPOSERS)
+                + f" {mixed / n:8.3f}",
                 flush=True,
             )
     print(f"{time.perf_counter() - t0:.0f} s")
     if args.json:
         with open(args.json, "w") as f:
-            figures = {"db": args.db, "sets": args.tree_sets, "k": k, "seed": args.seed, "rows": rows}
+            figures = {"db": args.db, "sets": args.tree_sets, "k": k, "share": args.share, "seed": args.seed}
+            figures["rows"] = rows
             json.dump(figures, f, indent=1)
 
 
