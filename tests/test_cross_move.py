@@ -1,5 +1,5 @@
-"""The scripted Cross move curve and curl (twisted.proposals), and the planner options that use them and
-the R1 room (``--cross-move``, ``--curl-move``, ``--r1-room``).
+"""The scripted Cross move curve (twisted.proposals), and the planner options that use it and the R1 room
+(``--cross-move``, ``--r1-room``).
 
 The rope configurations are made by the simulator from the straight rope with seeded curves, so each
 test sees the same ropes every time.
@@ -16,19 +16,9 @@ from twisted.goals import PlanInputError
 from twisted.moves import Move, successors
 from twisted.planner import PlannerOptions, planner_options
 from twisted.planner.options import N_LINKS as PLANNER_N_LINKS
-from twisted.proposals import (
-    CURL_BEYOND_M,
-    CURL_GAP_LINKS,
-    CURL_LIFT_M,
-    CURL_ON_LINE_M,
-    across_curve,
-    cross_move_curve,
-    curl_move_aim,
-    curl_move_curve,
-    segment_bounds,
-)
+from twisted.proposals import across_curve, cross_move_curve, segment_bounds
 from twisted.sim import N_LINKS, RopeSim, sample_curve
-from twisted.topology import PData, cross2, top
+from twisted.topology import PData, top
 
 
 @cache
@@ -131,56 +121,6 @@ def test_cross_move_curves_make_their_move_in_the_simulator_more_often_than_rand
                     hits[name] += 1
     assert len(moves) == 12
     assert hits["scripted"] >= 5 and hits["scripted"] >= 3 * max(1, hits["random"]), hits
-
-
-def test_a_curl_curve_carries_a_link_of_the_segment_across_a_point_of_it_a_few_links_along() -> None:
-    """Every R1 move on the long segments of a 3-crossing rope: the carried link is lifted, lies on
-    the segment, and is put down just past a point of the segment 2-8 links after it (first visit
-    over) or before it (under), on the far side from where it lay, crossing with the move's sign."""
-    _, points = _rope(3)
-    p = top(points)
-    bounds = segment_bounds(points)
-    rng = np.random.default_rng(0)
-    moves = [s.move for s in successors(p) if s.move.kind == "R1"]
-    long = [m for m in moves if bounds[m.segment + 1] - bounds[m.segment] > 5]
-    assert len(long) >= 8
-    fitting = 0
-    for move in long:
-        lo, hi = bounds[move.segment], bounds[move.segment + 1]
-        for _ in range(5):
-            curve, s = curl_move_aim(rng, points, move)
-            assert CURL_LIFT_M[0] <= curve.z_max_m <= CURL_LIFT_M[1]
-            assert lo - 0.5 <= curve.link + 0.5 <= hi + 0.5 and lo < s < hi
-            gap = (s - (curve.link + 0.5)) * (1 if move.over == "O" else -1)
-            assert CURL_GAP_LINKS[0] <= gap <= CURL_GAP_LINKS[1], (move, gap)
-            centre = 0.5 * (points[curve.link, :2] + points[curve.link + 1, :2])
-            target = centre + np.array([curve.x_m, curve.y_m])
-            at, walk = _at(points, s)[:2], points[int(s) + 1, :2] - points[int(s), :2]
-            walk /= np.hypot(*walk)
-            before, after = cross2(walk, centre - at), cross2(walk, target - at)  # > 0: on its left
-            assert CURL_BEYOND_M[0] - 1e-9 <= abs(after) <= CURL_BEYOND_M[1] + 1e-9
-            assert np.hypot(*(target - at)) <= CURL_BEYOND_M[1] + 1e-9  # just past the point
-            # over: the piece after the link, coming back from the far side ("O"), or the piece before
-            # it, going on to the far side ("U"); a piece running to the strand's right is + when over.
-            # A link on the strand's line (a straight piece) starts from the side the sign asks for.
-            # Where no link of the segment lies on that side, the carry crosses all the same.
-            want = 1 if move.sign == "+" else -1
-            start = -want if move.over == "O" else want
-            if abs(before) < CURL_ON_LINE_M or np.sign(before) == start:
-                fitting += 1
-                assert np.sign(after) == -start, move
-            else:
-                assert np.sign(after) == -np.sign(before), move
-    assert fitting >= 2 * len(long), (fitting, len(long))
-
-
-def test_a_move_that_is_not_a_curl_of_this_rope_is_refused() -> None:
-    _, points = _rope(1)
-    rng = np.random.default_rng(0)
-    with pytest.raises(ValueError, match="not an R1 move"):
-        curl_move_curve(rng, points, Move("Cross", 0, sign="+", over="O", other_segment=1, other_side="L"))
-    with pytest.raises(ValueError, match="does not fit a rope with 1 crossings"):
-        curl_move_curve(rng, points, Move("R1", 5, side="L", sign="+", over="O"))
 
 
 # ---- the planner's options for them ------------------------------------------------------------------

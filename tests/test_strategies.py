@@ -40,7 +40,6 @@ from twisted.planner.strategies import (
     RandomCurves,
     RetryWeightedNodes,
     ScriptedCross,
-    ScriptedCurl,
     StateMatch,
     StepCurves,
     UcbPlans,
@@ -279,37 +278,15 @@ def test_a_cross_step_takes_its_share_of_scripted_curves_first(share: float, scr
     node = _one_crossing_node()
     cross = next(s for s in successors(node.p_data) if s.move.kind == "Cross")
     sampler = _Counting()
-    step = StepCurves(sampler, ((ScriptedCross(), share),))
-    curves, script, made = step.propose(node, cross.state, cross.move, 3, np.random.default_rng(1))
+    step = StepCurves(sampler, ScriptedCross(), share)
+    curves, made = step.propose(node, cross.state, cross.move, 3, np.random.default_rng(1))
     assert len(curves) == 3 and made == scripted and sampler.asked == 3 - scripted
-    assert (script is None) == (share == 0.0)
     # the scripted ones come first: the same draws as the script's own
     alone = ScriptedCross().sample(node, cross.state, cross.move, scripted, np.random.default_rng(1))
     assert curves[:scripted] == alone
     r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1")
-    curves, script, made = step.propose(node, r1.state, r1.move, 3, np.random.default_rng(1))
-    assert len(curves) == 3 and script is None and made == 0 and sampler.asked == 6 - scripted
-
-
-def test_an_r1_step_takes_the_curl_share_from_two_crossings_and_a_cross_step_the_cross_share() -> None:
-    state, points = _rope_with(2)
-    node = Node(0, None, state, points, top(points), None, 0, 0)
-    cross = next(s for s in successors(node.p_data) if s.move.kind == "Cross")
-    r1 = next(s for s in successors(node.p_data) if s.move.kind == "R1")
-    sampler = _Counting()
-    step = StepCurves(sampler, ((ScriptedCross(), 1.0), (ScriptedCurl(), 0.34)))
-    curves, script, made = step.propose(node, r1.state, r1.move, 3, np.random.default_rng(1))
-    assert isinstance(script, ScriptedCurl) and made == 1 and sampler.asked == 2
-    assert curves[:1] == ScriptedCurl().sample(node, r1.state, r1.move, 1, np.random.default_rng(1))
-    curves, script, made = step.propose(node, cross.state, cross.move, 3, np.random.default_rng(1))
-    assert isinstance(script, ScriptedCross) and made == 3 and sampler.asked == 2
-    # from one crossing a curl is the model's (ScriptedCurl.from_cross)
-    one = _one_crossing_node()
-    r1 = next(s for s in successors(one.p_data) if s.move.kind == "R1")
-    curves, script, made = step.propose(one, r1.state, r1.move, 3, np.random.default_rng(1))
-    assert script is None and made == 0 and sampler.asked == 5
-    with pytest.raises(ValueError, match="R1 moves"):
-        ScriptedCurl().sample(node, cross.state, cross.move, 1, np.random.default_rng(0))
+    curves, made = step.propose(node, r1.state, r1.move, 3, np.random.default_rng(1))
+    assert len(curves) == 3 and made == 0 and sampler.asked == 6 - scripted
 
 
 def test_a_removing_move_and_another_kind_are_never_scripted() -> None:
@@ -318,9 +295,9 @@ def test_a_removing_move_and_another_kind_are_never_scripted() -> None:
     removing = dataclasses.replace(cross.move, remove=True)
     sampler = _Counting()
     assert (
-        StepCurves(sampler, ((ScriptedCross(), 1.0),)).propose(
+        StepCurves(sampler, ScriptedCross(), 1.0).propose(
             node, cross.state, removing, 3, np.random.default_rng(0)
-        )[2]
+        )[1]
         == 0
     )
     assert sampler.asked == 3
@@ -328,7 +305,7 @@ def test_a_removing_move_and_another_kind_are_never_scripted() -> None:
     with pytest.raises(ValueError, match="Cross moves"):
         ScriptedCross().sample(node, cross.state, curl, 1, np.random.default_rng(0))
     with pytest.raises(ValueError, match="share"):
-        StepCurves(_Counting(), ((ScriptedCross(), 1.5),))
+        StepCurves(_Counting(), share=1.5)
 
 
 # --- goal tests ---------------------------------------------------------------------------------------
@@ -373,12 +350,8 @@ def test_default_parts_follow_the_options(
     assert (parts.room is not None) == room and isinstance(parts.goal_test, StateMatch)
     assert isinstance(parts.step_curves.sampler, RandomCurves)  # no sampler given: random curves
     # the script's share is the option's for planner twisted, none for the baselines
-    shares = {kind: share for kind, (_, share) in parts.step_curves.scripts.items()}
-    assert shares == {"Cross": options.cross_move}  # curl_move is 0 by default: R1 steps unscripted
-    curl = default_parts(dataclasses.replace(options, curl_move=0.5), check_goal(ONE)).step_curves
-    shares = {kind: share for kind, (_, share) in curl.scripts.items()}
-    assert shares == {"Cross": options.cross_move, "R1": 0.5}
-    assert default_parts(PlannerOptions(planner="random-low"), check_goal(ONE)).step_curves.scripts == {}
+    assert parts.step_curves.share == options.cross_move
+    assert default_parts(PlannerOptions(planner="random-low"), check_goal(ONE)).step_curves.share == 0.0
     with pytest.raises(ValueError, match="PullTest"):
         default_parts(PlannerOptions(tighten=True), check_goal(ONE))
 
@@ -391,7 +364,7 @@ def test_every_option_is_declared_once_and_its_forms_come_from_the_declaration()
     assert list(declared) == list(PlannerOptions.__dataclass_fields__)
     defaults = PlannerOptions()
     assert defaults.to_dict() == {name: spec.default for name, spec in declared.items()}
-    before = {"retry_weight": 1.0, "cross_move": 0.0, "curl_move": 0.0, "r1_room": 0.0, "tighten": False}
+    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "tighten": False}
     assert OPTIONS_BEFORE == before
     assert set(result_options()) == {n for n, s in declared.items() if "eval" in s.commands}
     assert "seed" not in result_options() and "k" in result_options()

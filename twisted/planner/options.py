@@ -131,16 +131,6 @@ class PlannerOptions:
         before=0.0,
         before_in_evals=True,
     )
-    curl_move: float = option(
-        0.0,
-        "Share of the K curves of a plan step toward an R1 curl that are scripted (a link of the curl's "
-        "segment carried across another point of it; planner twisted) instead of drawn from the model "
-        "(0: all from the model).",
-        must="be a share of the K curves in [0, 1]",
-        commands=EVALUATED,
-        before=0.0,
-        before_in_evals=True,
-    )
     r1_room: float = option(
         8.0,
         "Room for R1 curls: a node whose segment for the curl is shorter than this many links gets "

@@ -77,8 +77,7 @@ __all__ = [
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
 # steps achieved] per state a follow_plan step started from (for analysis); [curves, curves
-# that reached the plan's next state] per proposer of a scripted step's curves ("cross_move", "sampler"
-# for Cross steps, "curl_move", "sampler R1" for R1 steps);
+# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler");
 # [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", for
 # analysis)
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross", "kind")
@@ -379,14 +378,14 @@ class Twisted:
         for step, (next_state, move) in enumerate(zip(plan.states[1:], plan.moves, strict=True)):
             if step:
                 self._check_stop(self._deadline_s)
-            curves, script, scripted = self.step_curves(current, next_state, move)
+            curves, scripted = self.step_curves(current, next_state, move)
             children = self.simulate(current, curves, "follow_plan")
             reached = [c is not None and c.p_data == next_state for c in children]
             hit = next((c for c, ok in zip(children, reached, strict=True) if ok), None)
-            if script is not None:  # each proposer's hits
-                other = "sampler" if script.kind == "Cross" else f"sampler {script.kind}"
+            script = self.parts.step_curves.script
+            if move is not None and move.kind == script.kind and not move.remove:  # each proposer's hits
                 self._count("cross", script.name, scripted, sum(reached[:scripted]))
-                self._count("cross", other, len(curves) - scripted, sum(reached[scripted:]))
+                self._count("cross", "sampler", len(curves) - scripted, sum(reached[scripted:]))
             self._count("move", f"{move.kind}^-1" if move.remove else str(move.kind), 1, hit is not None)
             self._count("kind", kind_key(move, current.p_data.cross), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
@@ -398,9 +397,9 @@ class Twisted:
             current = hit
         return len(plan.moves)
 
-    def step_curves(self, node: Node, next_state: PData, move: Any) -> tuple[list[Any], Any, int]:
-        """The K curves of a plan step, the script that made the first of them (None: none) and how
-        many it made (``parts.step_curves``)."""
+    def step_curves(self, node: Node, next_state: PData, move: Any) -> tuple[list[Any], int]:
+        """The K curves of a plan step and how many of them (the first) are scripted
+        (``parts.step_curves``)."""
         return self.parts.step_curves.propose(node, next_state, move, self.options.k, self.rng)
 
     def random_expand(self) -> None:

@@ -13,8 +13,7 @@ Monte Carlo tree search takes its evaluator and child-selection function):
 - :class:`R1Room`: the room a node's segment leaves for an R1 curl, shared by the three selections
   above when ``r1_room > 0`` (DESIGN 8);
 - curve proposers (``CurveSampler``): the inverse model (``twisted.model.sampler.ModelCurves``), a SAC
-  policy (``twisted.rl``), :class:`RandomCurves`, :class:`ScriptedCross`, :class:`ScriptedCurl`
-  (``twisted.proposals``);
+  policy (``twisted.rl``), :class:`RandomCurves`, :class:`ScriptedCross` (``twisted.proposals``);
   :class:`StepCurves` draws a plan step's K curves from them;
 - goal tests (``GoalTest``): :class:`StateMatch` (a goal state reached) and :class:`PullTest` (and the
   rope pulled tight ties the goal's knot, ``twisted.tighten``).
@@ -53,7 +52,6 @@ __all__ = [
     "RandomCurves",
     "RetryWeightedNodes",
     "ScriptedCross",
-    "ScriptedCurl",
     "SearchView",
     "StateMatch",
     "StateSelection",
@@ -320,7 +318,6 @@ class ScriptedCross:
 
     name = "cross_move"
     kind = "Cross"
-    from_cross = 0
 
     def sample(
         self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
@@ -332,31 +329,11 @@ class ScriptedCross:
         return [cross_move_curve(rng, node.points, move) for _ in range(n)]
 
 
-class ScriptedCurl:
-    """The scripted curl (:func:`twisted.proposals.curl_move_curve`): a link of the curl's segment
-    carried across another point of it, with the move's sign. Only for R1 moves, and only from states
-    with at least 2 crossings: from 0 and 1 the model's curves made curls more often (DESIGN 8)."""
-
-    name = "curl_move"
-    kind = "R1"
-    from_cross = 2
-
-    def sample(
-        self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
-    ) -> list[Any]:
-        from twisted.proposals import curl_move_curve
-
-        if move is None or move.kind != self.kind:
-            raise ValueError(f"the scripted curl makes R1 moves, not {move}")
-        return [curl_move_curve(rng, node.points, move) for _ in range(n)]
-
-
 class ScriptedMove(Protocol):
-    """A curve proposer for one kind of move (:class:`ScriptedCross`, :class:`ScriptedCurl`)."""
+    """A curve proposer for one kind of move (:class:`ScriptedCross`)."""
 
     name: str
     kind: str
-    from_cross: int  # scripted only for steps from states with at least this many crossings
 
     def sample(
         self, node: Node, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
@@ -364,45 +341,31 @@ class ScriptedMove(Protocol):
 
 
 class StepCurves:
-    """The K curves of a plan step: for a step toward a move that one of ``scripts`` makes (a
-    ``(script, share)`` pair per move kind), ``round(share * K)`` scripted curves first, then the
-    rest from ``sampler``; every other step all K from ``sampler``.
+    """The K curves of a plan step: for a step toward the move ``script`` makes (default
+    :class:`ScriptedCross`), ``round(share * K)`` scripted curves first, then the rest from ``sampler``;
+    every other step all K from ``sampler``.
 
-    :meth:`propose` returns the curves, scripted first, the script (None for none) and how many are
-    scripted; the search counts the curves and hits of each proposer of a scripted step (the
-    ``cross`` statistics). A removing move (``move.remove``), and a step from fewer crossings than the
-    script's ``from_cross``, are never scripted. A share of 0 leaves the kind unscripted.
+    :meth:`propose` returns the curves, scripted first, and how many are scripted; the search counts
+    the curves and hits of each proposer of a step toward the script's move (the ``cross`` statistics).
+    A removing move (``move.remove``) is never scripted.
     """
 
-    def __init__(self, sampler: CurveSampler, scripts: tuple[tuple[ScriptedMove, float], ...] = ()) -> None:
-        for script, share in scripts:
-            if not 0.0 <= share <= 1.0:
-                raise ValueError(f"the scripted share of {script.name} must lie in [0, 1], got {share}")
-        self.sampler = sampler
-        self.scripts: dict[str, tuple[ScriptedMove, float]] = {
-            script.kind: (script, share) for script, share in scripts if share > 0.0
-        }
-
-    def script_for(self, node: Node, move: Any) -> tuple[ScriptedMove, float] | None:
-        """The script and share for a step from ``node`` toward ``move`` (None: all curves from the
-        sampler)."""
-        if move is None or move.remove:
-            return None
-        found = self.scripts.get(move.kind)
-        return found if found is not None and node.p_data.cross >= found[0].from_cross else None
+    def __init__(self, sampler: CurveSampler, script: ScriptedMove | None = None, share: float = 0.0) -> None:
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"the scripted share must lie in [0, 1], got {share}")
+        self.sampler, self.share = sampler, share
+        self.script: ScriptedMove = script if script is not None else ScriptedCross()
 
     def propose(
         self, node: Node, next_state: PData, move: Any, k: int, rng: np.random.Generator
-    ) -> tuple[list[Any], ScriptedMove | None, int]:
-        found = self.script_for(node, move)
-        if found is None:
-            return self.sampler.sample(node, next_state, move, k, rng), None, 0
-        script, share = found
-        scripted = min(k, int(round(share * k)))
-        curves = script.sample(node, next_state, move, scripted, rng) if scripted else []
+    ) -> tuple[list[Any], int]:
+        scripted = 0
+        if move is not None and move.kind == self.script.kind and not move.remove:
+            scripted = min(k, int(round(self.share * k)))
+        curves = self.script.sample(node, next_state, move, scripted, rng) if scripted else []
         if scripted < k:
             curves += self.sampler.sample(node, next_state, move, k - scripted, rng)
-        return curves, script, scripted
+        return curves, scripted
 
 
 # --- the goal test ------------------------------------------------------------------------------------------
@@ -483,9 +446,8 @@ def default_parts(
     goal_test: GoalTest | None = None,
 ) -> Parts:
     """The parts ``options`` name: heuristic -> state and plan selection, ``retry_weight`` and ``r1_room``
-    -> node selection (and the room the crs and plan choices weigh), ``cross_move`` and ``curl_move`` ->
-    the scripted shares of a Cross and an R1 step (planner twisted); ``sampler`` (None: random curves)
-    proposes the other curves.
+    -> node selection (and the room the crs and plan choices weigh), ``cross_move`` -> the scripted share
+    of a Cross step (planner twisted); ``sampler`` (None: random curves) proposes the other curves.
     ``goal_test`` defaults to :class:`StateMatch`; with ``options.tighten`` it must be given (a
     :class:`PullTest`, as :mod:`twisted.planner.session` makes it)."""
     if goal_test is None:
@@ -502,13 +464,12 @@ def default_parts(
     else:
         states, plans = CrossingStates(room), UniformPlans(room)
     random_curves = RandomCurves()
-    twisted = options.planner == "twisted"
-    scripts = ((ScriptedCross(), options.cross_move), (ScriptedCurl(), options.curl_move)) if twisted else ()
+    share = options.cross_move if options.planner == "twisted" else 0.0
     return Parts(
         states=states,
         plans=plans,
         nodes=RetryWeightedNodes(options.retry_weight, room),
-        step_curves=StepCurves(sampler if sampler is not None else random_curves, scripts),
+        step_curves=StepCurves(sampler if sampler is not None else random_curves, ScriptedCross(), share),
         expand_curves=random_curves,
         goal_test=goal_test,
         room=room,

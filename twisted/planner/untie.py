@@ -83,9 +83,9 @@ class BothWays(Twisted):
     def wants_plans(self, p_data: PData) -> bool:
         return p_data not in self.goal
 
-    def step_curves(self, node: Any, next_state: PData, move: Any) -> tuple[list[Any], Any, int]:
+    def step_curves(self, node: Any, next_state: PData, move: Any) -> tuple[list[Any], int]:
         if move is not None and move.remove and self.removal_curves == "random":
-            return self.random_curves.sample(node, None, None, self.options.k, self.rng), None, 0
+            return self.random_curves.sample(node, None, None, self.options.k, self.rng), 0
         return super().step_curves(node, next_state, move)
 
 
