@@ -106,6 +106,12 @@ def train_command(
             "that reaches one of their states; repeatable.",
         ),
     ] = None,
+    removing: bool = typer.Option(
+        TrainConfig.removing,
+        "--removing/--no-removing",
+        help="Also train on the collected transitions that remove crossings (`collect --remove-share`), "
+        "each conditioned on its removing move.",
+    ),
     val_fraction: float = typer.Option(TrainConfig.val_fraction, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(
         TrainConfig.augment, "--augment/--no-augment", help="Mirror/Reverse augmentation."
@@ -160,6 +166,7 @@ def train_command(
         sources=tuple(sources),
         hold_out_sets=tuple(dict.fromkeys(hold_out_sets or [])),
         init_model_id=init_model,
+        removing=removing,
     )
     store = open_db(ctx, create=False)  # training needs collected data: a new database has none
     _train(store, config, resume, device, threads)

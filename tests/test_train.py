@@ -37,12 +37,13 @@ def one_torch_thread() -> Iterator[None]:
     torch.set_num_threads(before)
 
 
-def fill_store(url: str, n_transitions: int, seed: int = 0) -> dict[str, int]:
-    """A small store of synthetic transitions between random ropes (cross rising by 1 or 2; a few by 7)."""
+def fill_store(url: str, n_transitions: int, seed: int = 0, removing: int = 0) -> dict[str, int]:
+    """A small store of synthetic transitions between random ropes (cross rising by 1 or 2; a few flat
+    ones), and ``removing`` more whose cross falls by 1 (``counts["minus1"]``)."""
     rng = np.random.default_rng(seed)
     store = open_store(url)
     by_cross: dict[int, list[int]] = {}
-    counts = {"plus1": 0, "plus2": 0, "too_long": 0, "flat": 0}
+    counts = {"plus1": 0, "plus2": 0, "too_long": 0, "flat": 0, "minus1": 0}
     with store.session(write=True) as session:
         run = start_run(session, "collect", {"synthetic": True}, seed=seed)
         for s in range(4 * n_transitions):
@@ -53,11 +54,13 @@ def fill_store(url: str, n_transitions: int, seed: int = 0) -> dict[str, int]:
             c = add_configuration(session, run_id=run.id, p_data=p, q=np.zeros(93), points=pts)
             by_cross.setdefault(p.cross, []).append(c.id)
         made = 0
-        while made < n_transitions:
+        while made < n_transitions + removing:
             a = int(rng.integers(0, 3))
             step = 1 if rng.random() < 0.7 else 2
             if rng.random() < 0.05:
                 step = 0  # transitions that add no crossing are not training data
+            if made >= n_transitions:
+                a, step = a + 1, -1  # the rest remove a crossing
             if not by_cross.get(a) or not by_cross.get(a + step):
                 continue
             src = int(rng.choice(by_cross[a]))
@@ -79,8 +82,8 @@ def fill_store(url: str, n_transitions: int, seed: int = 0) -> dict[str, int]:
                     to_cross=cd.cross,
                 )
             )
-            counts["flat" if step == 0 else f"plus{step}"] += 1
-            made += step > 0
+            counts["flat" if step == 0 else f"plus{step}" if step > 0 else "minus1"] += 1
+            made += step != 0
     store.close()
     return counts
 
@@ -117,6 +120,49 @@ def test_loading_in_chunks_reads_every_adding_transition_once(
     assert whole.state_enc.shape[1] == 4
     limited = load_transitions(store, max_id=int(whole.transition_ids[9]))
     assert len(limited) == 10
+
+
+def test_removing_transitions_train_the_model_only_when_asked(tmp_path) -> None:
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    counts = fill_store(url, 80, seed=4, removing=40)
+    assert counts["minus1"] == 40
+    store = open_store(url)
+    adding = load_transitions(store)
+    both = load_transitions(store, removing=True)
+    assert len(adding) == counts["plus1"] + counts["plus2"]
+    assert len(both) == len(adding) + 40  # flat ones never
+    assert set(np.unique(both.to_cross - both.from_cross)) == {-1, 1, 2}
+    assert set(adding.transition_ids) < set(both.transition_ids)
+    # a removing pair's move, where one explains it, is marked -1 in its kind's entry (encode_move)
+    removing = np.flatnonzero(both.to_cross < both.from_cross)
+    kinds = both.move_enc[both.pair[removing], 0, 1:4]
+    assert (kinds <= 0).all() and (kinds < 0).any(dim=1).sum() > len(removing) // 2
+    runs = {}
+    for flag in (True, False):
+        done = train(store, TrainConfig(epochs=1, removing=flag, **FAST))
+        with store.session() as session:
+            run = session.get_one(TrainingRun, done.training_run_id)
+            runs[flag] = (run.n_train + run.n_val, run.parameters["removing"])
+    assert runs == {True: (len(both), True), False: (len(adding), False)}
+    # a run stored before the option trained on adding transitions only, and resumes so
+    params = TrainConfig(epochs=1, **FAST).to_dict()
+    del params["removing"]
+    assert TrainConfig.from_dict(params).removing is False
+    result = CliRunner().invoke(app, ["--db", url, "train", "--help"])
+    assert "--no-removing" in result.output
+
+
+def test_success_steps_name_removing_transitions(tmp_path) -> None:
+    names = (step_name(3, 2), step_name(4, 2), step_name(2, 4), step_name(0, 1))
+    assert names == ("3->2", "-2", "+2", "0->1")
+    url = f"sqlite:///{tmp_path / 's.db'}"
+    fill_store(url, 40, seed=5, removing=30)
+    store = open_store(url)
+    model = InverseModel(InverseNet(SMALL), metadata={})  # no snapshot: every transition is held out
+    steps = ("1->0", "2->1", "3->2")
+    held = held_out_transitions(store, model, per_step=1000, rng=np.random.default_rng(0), steps=steps)
+    assert len(held) == 30
+    assert all(h.p_to.cross == h.p_from.cross - 1 and h.step in steps for h in held)
 
 
 def test_split_never_puts_a_start_configuration_on_both_sides() -> None:

@@ -423,7 +423,8 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
         ctx.say(f"generation {row.generation}: resuming training run {row.training_run_id}")
         outcome = train(ctx.store, resume=True, command=f"twisted improve --name {config.lineage}")
     else:
-        sources = ("collect", "search") if max_transition_id(ctx.store) is not None else ("search",)
+        collected = max_transition_id(ctx.store, removing=True) is not None
+        sources = ("collect", "search") if collected else ("search",)
         train_config = replace(
             TrainConfig(),
             epochs=config.epochs,

@@ -69,6 +69,9 @@ class TrainConfig:
     # fine-tuning: start from this stored model's weights (and architecture) instead of a seeded
     # initialisation, so that what earlier data taught a model carries into training on new data
     init_model_id: int | None = None
+    # the collected transitions that remove crossings train the model too (labelled by the state
+    # reached, the removing move marked by encode_move); runs stored before this option had none
+    removing: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -83,4 +86,5 @@ class TrainConfig:
         net = NetConfig.from_dict(d.pop("net", {}))
         d["sources"] = tuple(d.get("sources", ("collect",)))
         d["hold_out_sets"] = tuple(d.get("hold_out_sets", ()))
+        d.setdefault("removing", False)  # stored before the option: adding transitions only
         return cls(net=net, **{k: v for k, v in d.items() if k in cls.__dataclass_fields__})

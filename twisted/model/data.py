@@ -142,15 +142,23 @@ class TransitionData:
         )
 
 
-def _usable() -> list:  # type: ignore[type-arg]
-    # +1 and +2 steps alike; states beyond the encoding's limit cannot be targets.
+def _usable(removing: bool = False) -> list:  # type: ignore[type-arg]
+    # +1 and +2 steps alike (and -1, -2 with ``removing``); states beyond the encoding's limit
+    # cannot be targets, nor starts (a removing move's segments are those of the state it starts from).
+    if removing:
+        return [
+            Transition.to_cross != Transition.from_cross,
+            Transition.to_cross <= MAX_CROSSINGS,
+            Transition.from_cross <= MAX_CROSSINGS,
+        ]
     return [Transition.to_cross > Transition.from_cross, Transition.to_cross <= MAX_CROSSINGS]
 
 
-def max_transition_id(store: Store) -> int | None:
-    """The newest usable transition id (the data snapshot a training run reads), None if none."""
+def max_transition_id(store: Store, *, removing: bool = False) -> int | None:
+    """The newest usable transition id (the data snapshot a training run reads), None if none;
+    ``removing``: transitions that remove crossings count as usable too."""
     with store.session() as session:
-        return session.scalar(select(func.max(Transition.id)).where(*_usable()))
+        return session.scalar(select(func.max(Transition.id)).where(*_usable(removing)))
 
 
 @dataclass
@@ -206,13 +214,17 @@ def load_transitions(
     max_id: int | None = None,
     chunk_size: int = CHUNK_SIZE,
     progress: Callable[[int, int], None] | None = None,
+    removing: bool = False,
 ) -> TransitionData:
-    """All usable transitions with ``id <= max_id`` (all when None), read in chunks of ``chunk_size``.
+    """All usable transitions with ``id <= max_id`` (all when None), read in chunks of ``chunk_size``;
+    with ``removing`` those that remove crossings too.
 
     Arrays are allocated once from a COUNT and filled chunk by chunk, so the rows are never held
     twice. Raises :class:`NoTrainingDataError` when there is nothing to train on.
     """
-    return load_samples(store, ("collect",), max_id=max_id, chunk_size=chunk_size, progress=progress)
+    return load_samples(
+        store, ("collect",), max_id=max_id, chunk_size=chunk_size, progress=progress, removing=removing
+    )
 
 
 def load_tree_edges(
@@ -252,10 +264,12 @@ def load_samples(
     hold_out_sets: Sequence[str] = (),
     chunk_size: int = CHUNK_SIZE,
     progress: Callable[[int, int], None] | None = None,
+    removing: bool = False,
 ) -> TransitionData:
-    """Samples of the given :data:`SOURCES`: transitions up to ``max_id``, tree edges up to
-    ``max_node_id`` (None: all) outside the trees of runs towards a goal of ``hold_out_sets``, and
-    none of either source that reaches one of their goal states.
+    """Samples of the given :data:`SOURCES`: transitions up to ``max_id`` (those that remove
+    crossings too with ``removing``), tree edges that add crossings up to ``max_node_id`` (None: all)
+    outside the trees of runs towards a goal of ``hold_out_sets``, and none of either source that
+    reaches one of their goal states.
     Raises :class:`NoTrainingDataError` when there are none."""
     unknown = [s for s in sources if s not in SOURCES]
     if unknown or not sources:
@@ -265,7 +279,7 @@ def load_samples(
         goals = _held_out_goals(session, hold_out_sets) if hold_out_sets else []
         goal_states = _goal_state_ids(session, goals)
         if "collect" in sources:
-            parts.append(_read_transitions(session, max_id, chunk_size, progress, goal_states))
+            parts.append(_read_transitions(session, max_id, chunk_size, progress, goal_states, removing))
         if "search" in sources:
             parts.append(_read_tree_edges(session, max_node_id, goals, goal_states))
         n = sum(len(p.ids) for p in parts)
@@ -306,8 +320,9 @@ def _read_transitions(
     chunk_size: int,
     progress: Callable[[int, int], None] | None,
     held_out_states: Sequence[int] = (),
+    removing: bool = False,
 ) -> _Rows:
-    where = _usable() + ([Transition.id <= max_id] if max_id is not None else [])
+    where = _usable(removing) + ([Transition.id <= max_id] if max_id is not None else [])
     if held_out_states:
         where.append(Transition.to_state_id.not_in(list(held_out_states)))
     n = int(session.scalar(select(func.count()).select_from(Transition).where(*where)) or 0)

@@ -3,7 +3,8 @@
 For a held-out transition ``(q, s, c, q', s')`` the model samples ``k`` curves for ``(q, s')``;
 each is simulated from ``q`` and the transition counts as solved when any result has P-data
 ``s'``. The same is done with ``k`` uniform random curves on the same transitions. Results are
-grouped by crossing step: ``0->1``, ``1->2``, ``2->3`` (and deeper ``+1`` steps) and ``+2``.
+grouped by crossing step: ``0->1``, ``1->2``, ``2->3`` (and deeper ``+1`` steps) and ``+2``; the
+transitions that remove crossings (``collect --remove-share``) as ``3->2`` (``-1`` steps) and ``-2``.
 
 Held-out means: the validation side of the model's own split (same seed and fraction, by start
 configuration), plus transitions newer than its data snapshot whose start configuration it never
@@ -45,8 +46,9 @@ __all__ = ["HeldOut", "StepResult", "held_out_transitions", "step_name", "succes
 
 
 def step_name(from_cross: int, to_cross: int) -> str:
-    """``"0->1"`` style for +1 steps, ``"+2"`` for two crossings at once, ``"+3"``..."""
-    return f"{from_cross}->{to_cross}" if to_cross - from_cross == 1 else f"+{to_cross - from_cross}"
+    """``"0->1"`` style for +1 and -1 steps (``"3->2"``), ``"+2"`` / ``"-2"`` for two crossings at once..."""
+    change = to_cross - from_cross
+    return f"{from_cross}->{to_cross}" if abs(change) == 1 else f"{change:+d}"
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,11 @@ def held_out_transitions(
             select(
                 Transition.id, Transition.from_configuration_id, Transition.from_cross, Transition.to_cross
             )
-            .where(Transition.to_cross > Transition.from_cross, Transition.to_cross <= max_cross)
+            .where(
+                Transition.to_cross != Transition.from_cross,
+                Transition.to_cross <= max_cross,
+                Transition.from_cross <= max_cross,
+            )
             .order_by(Transition.id)
         ).all()
     ids = np.array([r[0] for r in rows], dtype=np.int64)

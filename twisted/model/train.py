@@ -364,7 +364,7 @@ def train(
         if config.init_model_id is not None:  # checked (and its architecture taken) before any write
             start_net = _init_model(store, config.init_model_id).net
             config = replace(config, net=start_net.config)
-        found = max_transition_id(store) if "collect" in config.sources else None
+        found = max_transition_id(store, removing=config.removing) if "collect" in config.sources else None
         if "search" in config.sources:
             config = replace(config, max_search_node_id=max_search_node_id(store) or 0)
         check_hold_out_sets(store, config.hold_out_sets)
@@ -396,6 +396,7 @@ def train(
         max_id=max_id,
         max_node_id=config.max_search_node_id,
         hold_out_sets=config.hold_out_sets,
+        removing=config.removing,
     )
     train_idx, val_idx = split_by_start(data.start_ids, config.val_fraction, config.seed)
     train_data, val_data = data.subset(train_idx), data.subset(val_idx)
