@@ -257,7 +257,16 @@ def main(
         False, "--version", is_eager=True, callback=_print_version, help="Print the version and exit."
     ),
 ) -> None:
+    check_rope_env()
     ctx.obj = AppState(db_url=db, log_file=log_file, verbose=verbose, force=force)
+
+
+def check_rope_env() -> None:
+    """Exit 2, before any command opens or writes anything, when ``TWISTED_ROPE`` names no rope."""
+    from twisted.rope import DEFAULT_ROPE, ROPE_ENV, ROPE_ENV_ERROR
+
+    if ROPE_ENV_ERROR is not None:
+        fail(f"{ROPE_ENV_ERROR}; unset {ROPE_ENV} to run the default rope ({DEFAULT_ROPE.name})")
 
 
 def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:

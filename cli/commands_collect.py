@@ -266,7 +266,9 @@ def db_command(
     from sqlalchemy import func, inspect, select, text
 
     import twisted.store
+    from twisted.rope import ROPE
     from twisted.store import Base, head_revisions
+    from twisted.store.rope import ROPE_ROW_ID, StoredRope
 
     for module in pkgutil.iter_modules(twisted.store.__path__):
         importlib.import_module(f"twisted.store.{module.name}")
@@ -279,11 +281,25 @@ def db_command(
             for name, table in sorted(Base.metadata.tables.items())
             if name in present
         }
+        stored = session.get(StoredRope, ROPE_ROW_ID) if "rope_profile" in present else None
     where = store.url.render_as_string(hide_password=True)
+    rope = None if stored is None else {"n_links": stored.n_links, "link_spacing_m": stored.link_spacing_m}
     if as_json:
-        print_json({"database": where, "dialect": store.dialect, "revisions": revisions, "rows": counts})
+        print_json(
+            {
+                "database": where,
+                "dialect": store.dialect,
+                "revisions": revisions,
+                "rope": rope,
+                "rows": counts,
+            }
+        )
         return
     console.print(f"database: {where} ({store.dialect})")
+    if stored is None:
+        console.print(f"rope: none recorded yet (no data written; this process runs {ROPE.name})")
+    else:
+        console.print(f"rope: {stored.profile().name}")
     console.print(
         f"schema revisions: {', '.join(revisions)} (this twisted: {', '.join(sorted(head_revisions()))})"
     )

@@ -44,7 +44,7 @@ ALONG_M = 0.03
 def across_curve(rng: np.random.Generator, points: npt.ArrayLike) -> Curve:
     """A curve that carries a uniformly chosen link across another, non-adjacent link.
 
-    ``points`` are the rope's 22 link points (m). The target is the other link's centre, moved to
+    ``points`` are the rope's N_POINTS link points (m). The target is the other link's centre, moved to
     its far side (seen from the grasped link) by a uniform distance in :data:`BEYOND_M` and along it
     by up to :data:`ALONG_M`; the displacement is clipped to the curve range.
     """
@@ -105,7 +105,7 @@ def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:
 
 
 def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: CrossMove) -> Curve:
-    """A curve aimed at making ``move`` (a ``Cross``) from the rope with these 22 link points."""
+    """A curve aimed at making ``move`` (a ``Cross``) from the rope with these N_POINTS link points."""
     pts = np.asarray(points, dtype=np.float64)
     if move.other_segment is None or move.over not in ("O", "U") or move.sign not in ("+", "-"):
         raise ValueError(f"not a Cross move: {move}")

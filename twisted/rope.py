@@ -6,7 +6,13 @@ same numbers instead of keeping copies.
 
 - :class:`RopeProfile` is the chain of capsule links the simulator builds (``twisted.sim.mjcf``):
   ``n_links`` links, ``link_spacing_m`` from centre to centre; its ``n_points`` centreline points
-  are the two tips and the joints between links. :data:`ROPE` is the one rope in use.
+  are the two tips and the joints between links. :data:`ROPE` is the one rope in use: 21 links
+  0.04 m apart (the paper's) unless the environment variable ``TWISTED_ROPE`` names another
+  (``"31"``: 31 links at 0.04 m; ``"31x0.03"``: 31 links at 0.03 m; :func:`parse_rope`). It is read
+  once, when this module is imported: every constant below is bound from it and imported by value
+  across the layers, so a process runs one rope from start to end. An invalid value does not stop
+  the import: the default is kept and the reason is in :data:`ROPE_ENV_ERROR`, which the CLI (and
+  :func:`check_rope_env`) turns into an error before anything is opened.
 - :data:`MAX_CROSSINGS` is the most crossings a state may have anywhere in the pipeline: the
   inverse model encodes P-data of fixed size up to it (``twisted.model.encoding``), so collection
   keeps transitions up to it, a goal above it is refused and the RL environment fails a curve
@@ -15,9 +21,32 @@ same numbers instead of keeping copies.
 
 from __future__ import annotations
 
+import math
+import os
 from dataclasses import dataclass
 
-__all__ = ["LINK_SPACING_M", "MAX_CROSSINGS", "N_LINKS", "N_POINTS", "ROPE", "ROPE_LENGTH_M", "RopeProfile"]
+__all__ = [
+    "DEFAULT_ROPE",
+    "DEFAULT_SPACING_M",
+    "LINK_SPACING_M",
+    "MAX_CROSSINGS",
+    "MAX_LINKS",
+    "MAX_ROPE_LENGTH_M",
+    "MAX_SPACING_M",
+    "MIN_LINKS",
+    "MIN_SPACING_M",
+    "N_LINKS",
+    "N_POINTS",
+    "ROPE",
+    "ROPE_ENV",
+    "ROPE_ENV_ERROR",
+    "ROPE_LENGTH_M",
+    "RopeProfile",
+    "check_rope_env",
+    "parse_rope",
+]
+
+ROPE_ENV = "TWISTED_ROPE"
 
 
 @dataclass(frozen=True)
@@ -43,12 +72,107 @@ class RopeProfile:
         """The rope's length (links times spacing)."""
         return self.n_links * self.link_spacing_m
 
+    @property
+    def name(self) -> str:
+        """The profile in words, for messages and figures: ``"21 links x 0.04 m (0.84 m)"``."""
+        return f"{self.n_links} links x {self.link_spacing_m:g} m ({self.length_m:.2f} m)"
 
-ROPE = RopeProfile(n_links=21, link_spacing_m=0.04)
+    @property
+    def env_value(self) -> str:
+        """What ``TWISTED_ROPE`` holds to run this rope: ``"31"``, or ``"31x0.03"`` at another spacing."""
+        if self.link_spacing_m == DEFAULT_SPACING_M:
+            return str(self.n_links)
+        return f"{self.n_links}x{self.link_spacing_m:g}"
+
+
+DEFAULT_SPACING_M = 0.04
+DEFAULT_ROPE = RopeProfile(n_links=21, link_spacing_m=DEFAULT_SPACING_M)  # the paper's rope
+
+# The ropes TWISTED_ROPE may name. The capsules themselves are fixed (twisted.sim.mjcf: radius 0.01 m,
+# a 0.03 m cylinder, 0.05 m from cap to cap); only their number and spacing change.
+# - At least 11 links: a goal may have 6 crossings (MAX_CROSSINGS), 12 visits along the rope; with
+#   fewer links than that, several visits must share a link and such states can hardly be laid out.
+# - At most 0.05 m apart: beyond it a gap opens between neighbouring capsules through which another
+#   strand (0.02 m thick) could slip, and the rope would no longer be a rope for the topology.
+# - At least 0.025 m apart: closer, neighbours overlap by more than half a capsule and the joint
+#   limits (110 degrees) no longer keep a link from folding onto its neighbour's body.
+# - At most 1.4 m long (and so at most 56 links): the simulator rejects a rope that leaves the
+#   1.2 m workspace radius (twisted.sim.rope.WORKSPACE_RADIUS_M) and a curve moves a link up to
+#   0.5 m: half the straight rope (0.7 m) plus 0.5 m is the workspace's edge.
+MIN_LINKS = 11
+MAX_LINKS = 56
+MIN_SPACING_M = 0.025
+MAX_SPACING_M = 0.05
+MAX_ROPE_LENGTH_M = 1.4
+
+
+def parse_rope(value: str) -> RopeProfile:
+    """The rope a ``TWISTED_ROPE`` value names: ``"LINKS"`` (0.04 m apart) or ``"LINKSxSPACING"``
+    (spacing in metres), e.g. ``"31"`` or ``"31x0.03"``; an empty value is the default rope.
+
+    Raises ValueError saying which value is wrong and why (not an integer, out of range, ...).
+    """
+    given = value
+    value = value.strip()
+    if not value:
+        return DEFAULT_ROPE
+    form = "give LINKS or LINKSxSPACING, e.g. 31 or 31x0.03"
+    links_text, sep, spacing_text = value.lower().partition("x")
+    try:
+        n_links = int(links_text.strip())
+    except ValueError:
+        raise ValueError(
+            f"{ROPE_ENV}={given!r}: the link count {links_text.strip()!r} is not an integer ({form})"
+        ) from None
+    spacing = DEFAULT_SPACING_M
+    if sep:
+        try:
+            spacing = float(spacing_text.strip())
+        except ValueError:
+            raise ValueError(
+                f"{ROPE_ENV}={given!r}: the spacing {spacing_text.strip()!r} is not a number of metres "
+                f"({form})"
+            ) from None
+        if not (math.isfinite(spacing) and spacing > 0):
+            raise ValueError(f"{ROPE_ENV}={given!r}: the spacing must be a positive length in metres")
+    if not MIN_LINKS <= n_links <= MAX_LINKS:
+        raise ValueError(
+            f"{ROPE_ENV}={given!r}: {n_links} links is out of range (give {MIN_LINKS} to {MAX_LINKS} links)"
+        )
+    if not MIN_SPACING_M <= spacing <= MAX_SPACING_M:
+        raise ValueError(
+            f"{ROPE_ENV}={given!r}: links {spacing:g} m apart is out of range (give {MIN_SPACING_M} to "
+            f"{MAX_SPACING_M} m: the capsules are fixed, 0.05 m from cap to cap)"
+        )
+    rope = RopeProfile(n_links, spacing)
+    if rope.length_m > MAX_ROPE_LENGTH_M + 1e-9:
+        raise ValueError(
+            f"{ROPE_ENV}={given!r}: a rope of {rope.name} is longer than {MAX_ROPE_LENGTH_M} m, the most the "
+            "simulator's 1.2 m workspace holds: give fewer links or a shorter spacing"
+        )
+    return rope
+
+
+def _rope_from_env() -> tuple[RopeProfile, str | None]:
+    try:
+        return parse_rope(os.environ.get(ROPE_ENV, "")), None
+    except ValueError as exc:
+        return DEFAULT_ROPE, str(exc)
+
+
+ROPE, ROPE_ENV_ERROR = _rope_from_env()
+
+
+def check_rope_env() -> None:
+    """Raise ValueError (the reason) when ``TWISTED_ROPE`` holds a value that names no rope."""
+    if ROPE_ENV_ERROR is not None:
+        raise ValueError(ROPE_ENV_ERROR)
+
+
 N_LINKS = ROPE.n_links
 N_POINTS = ROPE.n_points
 LINK_SPACING_M = ROPE.link_spacing_m
-ROPE_LENGTH_M = ROPE.length_m  # 0.84 m
+ROPE_LENGTH_M = ROPE.length_m  # 0.84 m by default
 
 # The model encodes goals of up to 6 crossings (docs/DESIGN.md section 6.1: the reference truncated to 3).
 MAX_CROSSINGS = 6

@@ -1,7 +1,7 @@
 """P-data: the topological state of an open rope (docs/DESIGN.md section 4).
 
 A state lists the crossing *visits* met when walking the projected rope from the head (link-0 tip)
-to the tail (link-20 tip). Visit ``p`` (1..2n) records whether the rope passes over (``O``) or
+to the tail (the last link's tip). Visit ``p`` (1..2n) records whether the rope passes over (``O``) or
 under (``U``) there, the position of the other visit of the same crossing (its partner), and the
 crossing's sign ``sign((d_over x d_under) . e_z)`` with both strand directions taken head->tail.
 
@@ -150,7 +150,7 @@ def _validate(entries: Sequence[Any]) -> PData:
     for i, entry in enumerate(entries):
         if not isinstance(entry, (list, tuple)) or len(entry) != 4:
             raise PDataError(
-                f"entry {i}: expected [position, \"O\"|\"U\", partner, \"+\"|\"-\"], got {_quote(entry)}"
+                f'entry {i}: expected [position, "O"|"U", partner, "+"|"-"], got {_quote(entry)}'
             )
         pos, over, partner, sign = entry
         for name, value in (("position", pos), ("partner", partner)):
@@ -159,9 +159,9 @@ def _validate(entries: Sequence[Any]) -> PData:
             if not INT64_MIN <= value <= INT64_MAX:  # compared, never printed: repr fails beyond 4,300 digits
                 raise PDataError(f"entry {i}: {name} is beyond 64 bits (P-data positions are 1..2n)")
         if over not in ("O", "U"):
-            raise PDataError(f"entry {i}: over/under must be \"O\" or \"U\", got {_quote(over)}")
+            raise PDataError(f'entry {i}: over/under must be "O" or "U", got {_quote(over)}')
         if sign not in ("+", "-"):
-            raise PDataError(f"entry {i}: sign must be \"+\" or \"-\", got {_quote(sign)}")
+            raise PDataError(f'entry {i}: sign must be "+" or "-", got {_quote(sign)}')
         visits.append(Visit(int(pos), over, int(partner), sign))
     m = len(visits)
     if m % 2:

@@ -44,7 +44,7 @@ if TYPE_CHECKING:  # twisted.sim (MuJoCo) is imported where the simulation runs
 
 CACHE_SIZE = 4096  # start configurations kept in memory per worker (then the cache starts over)
 
-# a D_Q configuration as the loop uses it: q, state id, crossing count, (22, 3) link points
+# a D_Q configuration as the loop uses it: q, state id, crossing count, (N_POINTS, 3) link points
 StartConfiguration = tuple[np.ndarray, int, int, np.ndarray]
 
 

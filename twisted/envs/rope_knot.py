@@ -4,11 +4,12 @@
   (uniformly over the crossing counts in the pool, then uniformly within a count, so 1-, 2- and
   3-crossing goals are equally frequent whatever their numbers of states). ``reset(seed=...)``
   replays: the goal and, for the same actions, the whole trajectory (the simulator is deterministic).
-* Action: ``Box(-1, 1, (4,))`` = (link, z_max, x, y) normalised. The link is the nearest of 0..20 to
-  ``(a0 + 1) / 2 * 20``; ``z_max = (a1 + 1) / 2 * 0.07`` m; ``(a2, a3) * 0.5`` m is the displacement
-  in the rope's *canonical frame* (the inverse model's, :func:`twisted.model.encoding.preprocess`:
-  centred, head->tail along +x), rotated back to the world and clipped to the curve ranges. The
-  canonical frame makes the policy's job invariant to where the rope lies and how it is turned.
+* Action: ``Box(-1, 1, (4,))`` = (link, z_max, x, y) normalised. The link is the nearest of 0..N_LINKS-1
+  to ``(a0 + 1) / 2 * (N_LINKS - 1)``; ``z_max = (a1 + 1) / 2 * 0.07`` m; ``(a2, a3) * 0.5`` m is the
+  displacement in the rope's *canonical frame* (the inverse model's,
+  :func:`twisted.model.encoding.preprocess`: centred, head->tail along +x), rotated back to the world and
+  clipped to the curve ranges. The canonical frame makes the policy's job invariant to where the rope lies
+  and how it is turned.
 * Observation (Dict): ``observation`` = the inverse model's geometric features of the link points
   in the canonical frame (centred points, which segments cross with over/under and sign, where the
   crossing visits lie; 506 floats) then the configuration's 40 joint angles (qpos after the free
@@ -88,13 +89,13 @@ def env_spaces() -> tuple[spaces.Dict, spaces.Box]:
 
 
 def _frame(points: npt.ArrayLike) -> tuple[npt.NDArray[np.float32], float, float]:
-    """(geometric features (GEOMETRY_DIM,), cos, sin of the canonical frame) of link points (22, 3)."""
+    """(geometric features (GEOMETRY_DIM,), cos, sin of the canonical frame) of link points (N_POINTS, 3)."""
     pre = preprocess(np.asarray(points, dtype=np.float64))
     return pre.features[0].numpy(), float(pre.cos[0]), float(pre.sin[0])
 
 
 def observation_of(points: npt.ArrayLike, q: npt.ArrayLike) -> npt.NDArray[np.float32]:
-    """The ``observation`` entry for link points (22, 3) and simulator state ``q`` (RopeSim.state())."""
+    """The ``observation`` entry for link points (N_POINTS, 3) and simulator state ``q`` (RopeSim.state())."""
     features, _, _ = _frame(points)
     joints = np.asarray(q, dtype=np.float64)[FREE_JOINT_QPOS : FREE_JOINT_QPOS + JOINT_DIM]
     return np.concatenate([features, joints.astype(np.float32)]).astype(np.float32)

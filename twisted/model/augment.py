@@ -3,7 +3,7 @@
 * **Mirror** reflects the world y -> -y: link points and the action's y flip, every P-data sign
   flips (:meth:`PData.mirror`). Physics (a horizontal table, gravity along -z) is symmetric under
   this reflection, up to chaos.
-* **Reverse** walks the rope tail -> head: link k becomes link 20 - k, the point order reverses,
+* **Reverse** walks the rope tail -> head: link k becomes link N_LINKS - 1 - k, the point order reverses,
   P-data positions are renumbered p -> 2n+1-p (:meth:`PData.reverse`); the action's displacement
   stays the same because the gripper moves the same physical link the same way.
 
@@ -62,7 +62,7 @@ def _negate(a: ArrayT, index: int) -> ArrayT:
 
 
 def mirror_points(points: ArrayT) -> ArrayT:
-    """Link points (..., 22, 3) reflected y -> -y."""
+    """Link points (..., N_POINTS, 3) reflected y -> -y."""
     return _negate(points, 1)
 
 
@@ -76,14 +76,14 @@ def mirror_p_data(p: PData) -> PData:
 
 
 def reverse_points(points: ArrayT) -> ArrayT:
-    """Link points (..., 22, 3) walked tail -> head."""
+    """Link points (..., N_POINTS, 3) walked tail -> head."""
     if isinstance(points, torch.Tensor):
         return points.flip(-2)
     return np.array(points[..., ::-1, :], copy=True)
 
 
 def reverse_curve(curve: ArrayT) -> ArrayT:
-    """Curves (..., 4): the same physical link, renumbered k -> 20 - k; displacement unchanged."""
+    """Curves (..., 4): the same physical link, renumbered k -> N_LINKS - 1 - k; displacement unchanged."""
     out = curve.clone() if isinstance(curve, torch.Tensor) else np.array(curve, copy=True)
     out[..., 0] = (N_LINKS - 1) - out[..., 0]
     return out
@@ -166,7 +166,7 @@ def apply_variant_move(move: Move, p_from: PData, variant: int) -> Move:
 def apply_variant(
     points: torch.Tensor, curve: torch.Tensor, variant: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-sample augmentation of a batch: points (B, 22, 3), curves (B, 4), variant (B,) in 0..3."""
+    """Per-sample augmentation of a batch: points (B, N_POINTS, 3), curves (B, 4), variant (B,) in 0..3."""
     mirror = (variant & MIRROR).bool()
     reverse = (variant & REVERSE).bool()
     points = torch.where(mirror[:, None, None], mirror_points(points), points)
@@ -219,7 +219,7 @@ def mirror_state(sim: RopeSim, state: npt.ArrayLike) -> npt.NDArray[np.float64]:
 
 
 def reverse_state(sim: RopeSim, state: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    """The same physical rope with its links renumbered k -> 20 - k (head and tail swapped).
+    """The same physical rope with its links renumbered k -> N_LINKS - 1 - k (head and tail swapped).
 
     The middle link stays the root but turns by pi about its local z (its x axis must point to
     the new tail): quaternion q -> q * (0, 0, 0, 1), body-frame angular velocity (wx, wy, wz) ->

@@ -9,10 +9,12 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["DEVICES", "LINK_HEADS", "NetConfig", "SOURCES", "TrainConfig"]
+from twisted.rope import DEFAULT_ROPE, ROPE, ROPE_ENV, RopeProfile
 
-# "pointer": one scorer shared by the 21 links reads the context and each link's token;
-# "dense": 21 logits straight from the context
+__all__ = ["DEVICES", "LINK_HEADS", "ModelRopeError", "NetConfig", "SOURCES", "TrainConfig"]
+
+# "pointer": one scorer shared by the N_LINKS links reads the context and each link's token;
+# "dense": N_LINKS logits straight from the context
 LINK_HEADS = ("pointer", "dense")
 # where training samples come from (twisted.model.data): collected transitions, planner tree edges
 SOURCES = ("collect", "search")
@@ -34,14 +36,41 @@ class NetConfig:
     new_visits: bool = True
     # condition on the abstract move (R1 / R2 / Cross, segments, sides, over/under, sign)
     move: bool = True
+    # the rope the network is made for (twisted.rope.ROPE of the process that built it): its shapes
+    # follow the link count, and its inputs are scaled by the rope's length
+    n_links: int = ROPE.n_links
+    link_spacing_m: float = ROPE.link_spacing_m
+
+    @property
+    def rope(self) -> RopeProfile:
+        return RopeProfile(self.n_links, self.link_spacing_m)
+
+    def check_rope(self) -> None:
+        """Raise :class:`ModelRopeError` unless the network is for the rope this process runs."""
+        if self.rope != ROPE:
+            raise ModelRopeError(
+                f"the model is for a rope of {self.rope.name} but this process runs a rope of {ROPE.name}: "
+                f"run with {ROPE_ENV}={self.rope.env_value} to use it, or train one for this rope "
+                "(`twisted train`)"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> NetConfig:
-        d = {"move": False, **d}  # models stored before the move input had none
+        # models stored before the move input had none; before ropes could differ, no rope: the default's
+        legacy = {
+            "move": False,
+            "n_links": DEFAULT_ROPE.n_links,
+            "link_spacing_m": DEFAULT_ROPE.link_spacing_m,
+        }
+        d = {**legacy, **d}
         return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
+
+
+class ModelRopeError(ValueError):
+    """A model made for another rope than the one this process runs (``TWISTED_ROPE``)."""
 
 
 @dataclass

@@ -90,7 +90,7 @@ class TransitionData:
     start_ids: npt.NDArray[np.int64]  # the split key: the start configuration (see the module docstring)
     from_cross: npt.NDArray[np.int64]
     to_cross: npt.NDArray[np.int64]
-    points: torch.Tensor  # (N, 22, 3) world frame, metres
+    points: torch.Tensor  # (N, N_POINTS, 3) world frame, metres
     curves: torch.Tensor  # (N, 4) link, z_max_m, x_m, y_m
     from_state: torch.Tensor  # (N,) long
     to_state: torch.Tensor  # (N,) long

@@ -2,7 +2,7 @@
 
 * :func:`encode_p_data` turns a P-data state into a fixed-size vector (up to
   :data:`MAX_CROSSINGS` crossings; a longer state is an :class:`EncodingError`, never truncated).
-* :func:`preprocess` turns link points (B, 22, 3) into the network's geometric input. It moves the
+* :func:`preprocess` turns link points (B, N_POINTS, 3) into the network's geometric input. It moves the
   rope into a *canonical frame*: centred on the mean of its points in the table plane and rotated
   about z so that the head->tail vector points along +x. Physics is invariant under translations
   and rotations about the vertical, so the model never has to learn them; the price is that the
@@ -162,7 +162,7 @@ def encode_new_visits(p_from: PData, p_to: PData) -> npt.NDArray[np.float32]:
 
 
 def new_visit_link_features(pre: Preprocessed, new: torch.Tensor) -> torch.Tensor:
-    """(B, 21, NEW_LINK_DIM): for each link and new visit, whether the link lies on the segment of
+    """(B, N_LINKS, NEW_LINK_DIM): for each link and new visit, whether the link lies on the segment of
     the current rope where that visit lands (x its over/under, x its sign).
 
     A link's segment is the number of current crossing visits before its middle along the rope.
@@ -217,13 +217,13 @@ def encode_move(move: Move | None) -> npt.NDArray[np.float32]:
 
 
 def link_segments(pre: Preprocessed) -> torch.Tensor:
-    """(B, 21) long: the segment of the current state each link lies on (visits before its middle)."""
+    """(B, N_LINKS) long: the segment of the current state each link lies on (visits before its middle)."""
     mids = torch.arange(N_LINKS, dtype=pre.visit_arcs.dtype, device=pre.visit_arcs.device) + 0.5
     return (pre.visit_arcs[:, None, :] < mids[None, :, None]).sum(dim=2)  # inf never counts
 
 
 def move_link_features(pre: Preprocessed, move: torch.Tensor) -> torch.Tensor:
-    """(B, 21, MOVE_LINK_DIM): for each link, whether it lies on the move's segment (and that side),
+    """(B, N_LINKS, MOVE_LINK_DIM): for each link, whether it lies on the move's segment (and that side),
     and on its other segment (and that side): where the move says the new crossings go."""
     base = 1 + len(MOVE_KINDS)
     tail = base + 2 * N_STATE_SEGMENTS
@@ -233,9 +233,7 @@ def move_link_features(pre: Preprocessed, move: torch.Tensor) -> torch.Tensor:
     link_segment = link_segments(pre)
     on = (link_segment == segment[:, None]).to(move.dtype) * known[:, None]
     on_other = (link_segment == other.argmax(dim=1)[:, None]).to(move.dtype) * has_other[:, None]
-    return torch.stack(
-        [on, on * move[:, tail, None], on_other, on_other * move[:, tail + 1, None]], dim=2
-    )
+    return torch.stack([on, on * move[:, tail, None], on_other, on_other * move[:, tail + 1, None]], dim=2)
 
 
 @dataclass
@@ -273,7 +271,7 @@ def crossing_features(points: torch.Tensor) -> Crossings:
     * ``pairs``: per non-adjacent segment pair, crossed x (+1 if the earlier segment is over,
       else -1) and crossed x sign.
     * ``visits``: per visit slot 1..12, the visits in the order P-data numbers them: present,
-      position along the rope / 21, planar location, over (+1) / under (-1). This ties the
+      position along the rope / N_LINKS, planar location, over (+1) / under (-1). This ties the
       P-data's visit numbers to places on the rope.
     * ``per_link``: per link (segment) k, its row of the crossing matrix (with every other
       segment: +1 over / -1 under where they cross, and the sign) and which visit slots lie on it.
@@ -328,7 +326,7 @@ def crossing_features(points: torch.Tensor) -> Crossings:
 
 
 def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
-    """Canonical-frame geometric features of link points, shape (B, 22, 3) or (22, 3) (metres)."""
+    """Canonical-frame geometric features of link points, shape (B, N_POINTS, 3) or (N_POINTS, 3) (metres)."""
     pts = torch.as_tensor(points, dtype=torch.float32)
     if pts.ndim == 2:
         pts = pts[None]

@@ -7,7 +7,7 @@ the new crossing visits land (:func:`twisted.model.encoding.new_visits`), and th
 makes the next state (R1 / R2 / Cross with its segments, sides, over/under and sign; the planner
 has it from the plan, training derives it from the transition with :func:`twisted.moves.explains`).
 
-``link`` is categorical over the 21 links, scored by one small network shared by all links that
+``link`` is categorical over the N_LINKS links, scored by one small network shared by all links that
 reads the context and the link's own token (its place, direction, crossings, P-data visits on it,
 and whether a new visit lands on its segment): choosing "the link on segment 3" then does not have
 to be learned separately for every link number. ``z``, ``x`` and ``y`` are each a small Gaussian
@@ -150,6 +150,7 @@ class InverseNet(nn.Module):
     def __init__(self, config: NetConfig | None = None) -> None:
         super().__init__()
         self.config = config = config or NetConfig()
+        config.check_rope()  # its shapes follow the link count: one of another rope cannot run here
         h = config.hidden
         new_dim = (NEW_DIM if config.new_visits else 0) + (MOVE_DIM if config.move else 0)
         self.token_dim = LINK_TOKEN_DIM + (NEW_LINK_DIM if config.new_visits else 0)
@@ -176,7 +177,7 @@ class InverseNet(nn.Module):
         return self.trunk(torch.cat(parts, dim=1))
 
     def tokens(self, pre: Preprocessed, cond: Condition) -> torch.Tensor:
-        """(B, 21, token_dim): each link's geometry, whether the next state's new visits land on it,
+        """(B, N_LINKS, token_dim): each link's geometry, whether the next state's new visits land on it,
         and whether it lies on the move's segments."""
         parts = [pre.link_tokens]
         if self.config.new_visits:
@@ -364,7 +365,7 @@ class InverseModel:
         p_data: PData | None = None,
         move: Move | None = None,
     ) -> list[Curve]:
-        """``n`` curves meant to take the rope at ``points`` (22, 3) to the state ``next_p_data``.
+        """``n`` curves meant to take the rope at ``points`` (N_POINTS, 3) to the state ``next_p_data``.
 
         ``q`` is accepted for the planner's contract but not read: the settled rope is described
         by its link points (capsules are symmetric about their axis; velocities are near zero).
@@ -393,7 +394,7 @@ class InverseModel:
     def link_probabilities(
         self, points: npt.ArrayLike, next_p_data: PData, p_data: PData | None = None, move: Move | None = None
     ) -> np.ndarray:
-        """(21,) probability of each link being the one to grasp."""
+        """(N_LINKS,) probability of each link being the one to grasp."""
         pts = np.asarray(points, dtype=np.float64)
         now = top(pts) if p_data is None else p_data
         logits = self.net.link_logits(preprocess(pts), self.condition(now, parse_p_data(next_p_data), move))

@@ -2,7 +2,9 @@
 
 ``load_model(store)`` returns the newest model in the ``models`` table, or the one asked for by
 id; when the database holds none it falls back to ``twisted/data/default_model.pt`` (installed as
-package data), so planning works right after installation.
+package data), so planning works right after installation. The shipped model is for the default rope
+(21 links): a process running another (``TWISTED_ROPE``) never falls back to it, and a stored model of
+another rope than the process's is refused (:class:`ModelError` naming both).
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ from typing import Any
 
 from sqlalchemy import select
 
+from twisted.model.config import ModelRopeError
 from twisted.model.network import InverseModel
+from twisted.rope import DEFAULT_ROPE, ROPE
 from twisted.store.db import Store
 from twisted.store.models import by_id_or_newest
 from twisted.store.training import TrainedModel
@@ -92,9 +96,15 @@ def default_model_path() -> Path:
     return Path(str(resources.files("twisted") / "data" / DEFAULT_MODEL_FILE))
 
 
-def load_default_model() -> InverseModel:
-    """The model shipped with the package."""
+def load_default_model(why: str = "") -> InverseModel:
+    """The model shipped with the package (for the default rope only; ``why``: what the message of a
+    process on another rope starts with, e.g. that the database holds no model)."""
     path = default_model_path()
+    if ROPE != DEFAULT_ROPE:
+        raise ModelError(
+            f"{why}the shipped default model is for the default rope of {DEFAULT_ROPE.name}, not this "
+            f"process's rope of {ROPE.name}: train a model for this rope with `twisted train`"
+        )
     if not path.is_file():
         raise ModelError(
             f"no trained model: the database holds none and the shipped default {path} is missing; "
@@ -113,6 +123,8 @@ def load_model_file(path: Path) -> InverseModel:
         raise ModelError(f"cannot be read: {exc.strerror or exc}") from exc
     try:
         return InverseModel.from_bytes(data)
+    except ModelRopeError as exc:
+        raise ModelError(str(exc)) from exc
     except Exception as exc:  # noqa: BLE001 (any file may be given: torch.load raises many kinds)
         raise ModelError(
             f"not an inverse model written by `twisted models --export` ({type(exc).__name__}: {exc})"
@@ -135,6 +147,7 @@ def load_model(store: Store | None = None, model_id: int | None = None) -> Inver
             )
             if row is not None:
                 return _from_bytes(row.weights, row.id, f"model {row.id} of the database")
+        return load_default_model("the database holds no model, and ")
     elif model_id is not None:
         raise ModelError(f"model {model_id} was asked for but no database was given")
     return load_default_model()

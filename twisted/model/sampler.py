@@ -23,7 +23,7 @@ __all__ = ["ModelCurves", "RopeNode"]
 class RopeNode(Protocol):
     """The rope a curve starts from (the planner's ``Node`` is one)."""
 
-    points: np.ndarray  # (22, 3) link points, head first
+    points: np.ndarray  # (N_POINTS, 3) link points, head first
     q: np.ndarray  # the simulator state
     p_data: PData
 
@@ -40,6 +40,4 @@ class ModelCurves:
     def sample(
         self, node: RopeNode, next_state: PData, move: Any | None, n: int, rng: np.random.Generator
     ) -> list[Any]:
-        return list(
-            self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move)
-        )
+        return list(self.model.sample(node.points, node.q, next_state, n, rng, p_data=node.p_data, move=move))

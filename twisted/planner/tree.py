@@ -34,7 +34,7 @@ class Node:
     index: int  # creation order in the run (0 = root)
     parent: int | None
     q: np.ndarray  # opaque simulator state (RopeSim.state())
-    points: np.ndarray  # (22, 3) link points, head first
+    points: np.ndarray  # (N_POINTS, 3) link points, head first
     p_data: PData
     curve: Any | None  # twisted.sim.Curve; None for the root
     iteration: int  # iteration that created it (0 = root)

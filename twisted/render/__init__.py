@@ -2,10 +2,11 @@
 
 Researchers look before they read. Three kinds of picture:
 
-- **Knot diagram** of a rope given by its 22 centreline points: the projection to the table as a
-  line, broken where it passes *under* another strand, every crossing visit numbered as in P-data
-  (``3O+`` = visit 3, over, positive crossing). Drawn from the same segment intersection test as
-  :func:`twisted.topology.top`, so the numbers on the picture are the numbers in the state.
+- **Knot diagram** of a rope given by its N_POINTS centreline points (22 on the default rope): the
+  projection to the table as a line, broken where it passes *under* another strand, every crossing visit
+  numbered as in P-data (``3O+`` = visit 3, over, positive crossing). Drawn from the same segment
+  intersection test as :func:`twisted.topology.top`, so the numbers on the picture are the numbers in the
+  state.
 - **Gauss diagram** of a P-data state without a configuration (an unseen goal): the rope as a
   straight line from head to tail, visits 1..2n along it, one chord per crossing drawn as an
   arrow from its over visit to its under visit, coloured by sign. It is the exact content of the

@@ -1,9 +1,10 @@
 """MJCF of the rope and the gripper (docs/DESIGN.md section 2), built in code once per simulator.
 
-The rope is an explicit body chain (no ``composite``, no plugin): 21 capsule links whose body
-frames sit at the link centres with the local x axis pointing from the head (link 0) towards the
-tail (link 20). The middle link carries the free joint and both halves hang off it, which keeps
-the kinematic tree shallow (a chain rooted at one end costs about three times more per step).
+The rope is an explicit body chain (no ``composite``, no plugin): ``ROPE.n_links`` (21 by default) capsule
+links (``twisted.rope``, ``TWISTED_ROPE``) whose body frames sit at the link centres with the local x axis
+pointing from the head (link 0) towards the tail (the last link). The middle link carries the free joint
+and both halves hang off it, which keeps the kinematic tree shallow (a chain rooted at one end costs about
+three times more per step).
 Each joint between neighbours is two hinges at the shared end point: yaw about local z and pitch
 about local y, with the stiffness, damping, armature and limits measured to work in MuJoCo 4.
 

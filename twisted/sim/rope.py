@@ -32,7 +32,8 @@ from twisted.topology import PData, top
 
 FloatArray = npt.NDArray[np.float64]
 
-# Action ranges (reference): link 0..20, z_max 0..0.07 m, (x, y) displacement -0.5..0.5 m.
+# Action ranges (reference): link 0..N_LINKS-1 (0..20 on the default rope), z_max 0..0.07 m,
+# (x, y) displacement -0.5..0.5 m.
 CURVE_LOW = np.array([0.0, 0.0, -0.5, -0.5])
 CURVE_HIGH = np.array([N_LINKS - 1, 0.07, 0.5, 0.5])
 
@@ -119,7 +120,7 @@ class Curve:
 
 
 def sample_curve(rng: np.random.Generator) -> Curve:
-    """A uniform random curve: link in 0..20, z_max in [0, 0.07] m, x, y in [-0.5, 0.5] m."""
+    """A uniform random curve: link in 0..N_LINKS-1, z_max in [0, 0.07] m, x, y in [-0.5, 0.5] m."""
     link = int(rng.integers(0, N_LINKS))
     z, x, y = rng.uniform(CURVE_LOW[1:], CURVE_HIGH[1:])
     return Curve(link, float(z), float(x), float(y))
@@ -155,7 +156,7 @@ class RopeSim:
         self._link_body = np.array([m.body(link_name(i)).id for i in range(N_LINKS)])
         self._link_geom = np.array([m.geom(link_name(i)).id for i in range(N_LINKS)])
         self._weld = np.array([m.equality(weld_name(i)).id for i in range(N_LINKS)])
-        # centreline point i (1..20) is the anchor of the joint between links i-1 and i
+        # centreline point i (1..N_LINKS-1) is the anchor of the joint between links i-1 and i
         self._pitch = np.array([m.joint(joint_names(i)[1]).id for i in range(N_LINKS - 1)])
         self._gripper = m.body("gripper").mocapid[0]
         self._tail_gripper = int(m.body(TAIL_GRIPPER).mocapid[0]) if tail_gripper else -1
@@ -212,7 +213,7 @@ class RopeSim:
     # ---- named quantities -----------------------------------------------------------------------
 
     def link_points(self) -> FloatArray:
-        """The 22 centreline points: link-0 tip (head), the 20 joints, link-20 tip (tail)."""
+        """The N_POINTS centreline points: link-0 tip (head), the N_LINKS - 1 joints, the last link's tip."""
         d = self.data
         head, tail = self._link_body[0], self._link_body[-1]
         pts = np.empty((N_POINTS, 3))
@@ -222,7 +223,7 @@ class RopeSim:
         return pts
 
     def link_positions(self) -> FloatArray:
-        """The 21 link centres, shape (21, 3)."""
+        """The N_LINKS link centres, shape (N_LINKS, 3)."""
         return self.data.xpos[self._link_body].copy()
 
     def p_data(self) -> PData:

@@ -4,7 +4,15 @@
 add theirs in ``twisted/store/<area>.py``), query helpers in :mod:`twisted.store.queries`.
 """
 
-from twisted.store.db import Store, StoreError, alembic_config, head_revisions, open_store, parse_url
+from twisted.store.db import (
+    RopeMismatchError,
+    Store,
+    StoreError,
+    alembic_config,
+    head_revisions,
+    open_store,
+    parse_url,
+)
 from twisted.store.models import (
     VIEW_NAMES,
     Base,
@@ -24,6 +32,7 @@ __all__ = [
     "CollectBatch",
     "CollectTry",
     "Configuration",
+    "RopeMismatchError",
     "Run",
     "Store",
     "StoreError",

@@ -5,7 +5,10 @@ file untouched) a file that is not an SQLite database, an SQLite/PostgreSQL data
 tables but no twisted migration history, or one whose Alembic revision is unknown to this version
 (a newer schema). Before a command writes, it also refuses a file whose ``-wal``/``-shm`` companions
 cannot be written, and (``verify=True``) one whose pages SQLite's ``quick_check`` finds damaged. Only
-then does it create the engine and upgrade to the current heads.
+then does it create the engine and upgrade to the current heads. Last, it compares the rope the
+database's data was made on (``rope_profile``) with the process's (:data:`twisted.rope.ROPE`): a
+database with none records the process's (unless opened read-only), one of another rope is refused
+(:class:`RopeMismatchError`, nothing written).
 
 SQLite connections run in WAL mode with a busy timeout, so readers (a ``sqlite3`` shell,
 ``twisted stats``) never block a running collector and several collectors can write the same file;
@@ -40,6 +43,10 @@ _PG_MIGRATION_LOCK = 0x7477_6973  # "twis"
 
 class StoreError(RuntimeError):
     """The database cannot be used; the message says which database and what to do."""
+
+
+class RopeMismatchError(StoreError):
+    """The database holds data of another rope than the one this process runs (``TWISTED_ROPE``)."""
 
 
 class Store:
@@ -513,11 +520,70 @@ def open_store(
 _OPEN_ATTEMPTS = 5
 
 
+def _stored_rope(conn: Connection) -> Any:
+    """The rope recorded in ``rope_profile`` (a :class:`twisted.rope.RopeProfile`), or None."""
+    from twisted.rope import RopeProfile
+
+    row = conn.execute(text("SELECT n_links, link_spacing_m FROM rope_profile ORDER BY id LIMIT 1")).first()
+    return None if row is None else RopeProfile(int(row[0]), float(row[1]))
+
+
+def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
+    """Refuse (:class:`RopeMismatchError`) a database whose data was made on another rope than this
+    process's; record this process's rope in one that has none yet, unless ``readonly``."""
+    from sqlalchemy import insert
+    from sqlalchemy.exc import IntegrityError
+
+    from twisted.rope import ROPE
+    from twisted.store.models import utcnow
+    from twisted.store.rope import ROPE_ROW_ID, StoredRope
+
+    with engine.connect() as conn:
+        stored = _stored_rope(conn)
+    if stored is None and not readonly:
+        try:
+            with engine.execution_options(twisted_begin_immediate=True).begin() as conn:
+                stored = _stored_rope(conn)  # under the write lock: another process may have been first
+                if stored is None:
+                    values = {
+                        "id": ROPE_ROW_ID,
+                        "n_links": ROPE.n_links,
+                        "link_spacing_m": ROPE.link_spacing_m,
+                        "created_at": utcnow(),
+                    }
+                    conn.execute(insert(StoredRope).values(**values))
+                    stored = ROPE
+        except IntegrityError:  # PostgreSQL: another process inserted it meanwhile
+            with engine.connect() as conn:
+                stored = _stored_rope(conn)
+    if stored is not None and stored != ROPE:
+        raise RopeMismatchError(rope_mismatch_message(where, stored))
+
+
+def rope_mismatch_message(where: str, stored: Any) -> str:
+    """Why a process on :data:`twisted.rope.ROPE` must not use data of the rope ``stored``, and how to run
+    with it."""
+    from twisted.rope import DEFAULT_ROPE, ROPE, ROPE_ENV
+
+    value = os.environ.get(ROPE_ENV, "")
+    given = f"{ROPE_ENV}={value!r}" if value.strip() else f"{ROPE_ENV} unset"
+    if stored == DEFAULT_ROPE:
+        how = f"run without {ROPE_ENV} (or {ROPE_ENV}={stored.env_value})"
+    else:
+        how = f"run with {ROPE_ENV}={stored.env_value} (e.g. `{ROPE_ENV}={stored.env_value} twisted ...`)"
+    return (
+        f"{where} holds data of a rope of {stored.name}, but this process runs a rope of {ROPE.name} "
+        f"({given}); nothing was written to it: {how} to use this "
+        "database, or choose another --db for this rope"
+    )
+
+
 def _open_store(
     parsed: URL, *, create: bool, upgrade: bool, readonly: bool = False, verify: bool = False
 ) -> Store:
     where = f"database {_display(parsed)!r}"
     heads = head_revisions()
+    reads_only = readonly  # as asked (an older schema is upgraded first, but the rope is never recorded)
     path = sqlite_path(parsed)
     current: list[str] | None = None
     if path is not None:
@@ -560,6 +626,11 @@ def _open_store(
             finally:
                 if writer is not engine:
                     writer.dispose()
+        if upgrade:  # without the upgrade (Alembic by hand) the table may not exist yet
+            try:
+                _check_rope(engine, where, readonly=reads_only)
+            except DBAPIError as exc:
+                raise StoreError(f"cannot read the rope profile of {where}: {exc.orig}") from exc
     except BaseException:
         engine.dispose()
         raise

@@ -162,7 +162,7 @@ class Tightening(Base):
     end_distance_m: Mapped[float | None] = mapped_column(Float)
     sim_seconds: Mapped[float] = mapped_column(Float)
     wall_seconds: Mapped[float] = mapped_column(Float)
-    points: Mapped[bytes | None] = mapped_column(LargeBinary)  # the tightened rope's 22 link points
+    points: Mapped[bytes | None] = mapped_column(LargeBinary)  # the tightened rope's N_POINTS link points
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 

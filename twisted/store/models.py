@@ -5,8 +5,9 @@ migration (``down_revision = "0001"``). The schema here must match ``migrations/
 exactly (``tests/test_store.py`` compares them).
 
 Arrays are stored as little-endian float64 BLOBs so a configuration restores bit for bit:
-``configurations.q`` is the simulator's opaque state vector, ``configurations.points`` the 22 link points
-(22 x 3, head to tail). Use :meth:`Configuration.q_array` / :meth:`Configuration.points_array` to read them.
+``configurations.q`` is the simulator's opaque state vector, ``configurations.points`` the N_POINTS
+link points (N_POINTS x 3, head to tail; 22 on the default rope). Use :meth:`Configuration.q_array` /
+:meth:`Configuration.points_array` to read them.
 """
 
 from __future__ import annotations
@@ -184,7 +185,7 @@ class Configuration(Base):
         return blob_to_array(self.q)
 
     def points_array(self) -> npt.NDArray[np.float64]:
-        """The 22 link points (22, 3), head to tail."""
+        """The N_POINTS link points (N_POINTS, 3), head to tail."""
         return blob_to_array(self.points, (-1, 3))
 
 

@@ -135,7 +135,7 @@ def add_configuration(
     q: npt.ArrayLike,
     points: npt.ArrayLike,
 ) -> Configuration:
-    """Insert a configuration (exact state ``q`` and its 22 link points) under its topological state."""
+    """Insert a configuration (exact state ``q`` and its N_POINTS link points) under its topological state."""
     state = get_or_create_state(session, p_data)
     config = Configuration(
         run_id=run_id,
@@ -222,7 +222,7 @@ class KeptTransition:
     x_m: float
     y_m: float
     q: bytes  # array_to_blob of the new configuration's exact state
-    points: bytes  # array_to_blob of its (22, 3) link points
+    points: bytes  # array_to_blob of its (N_POINTS, 3) link points
     p_data: PData
     steps: int | None = None
 
