@@ -22,6 +22,7 @@ from sqlalchemy import create_engine, text
 from twisted.model.config import ModelRopeError, NetConfig
 from twisted.rope import DEFAULT_ROPE, MAX_ROPE_LENGTH_M, ROPE, RopeProfile, parse_rope
 from twisted.store import RopeMismatchError, alembic_config, head_revisions, open_store
+from twisted.store.db import make_engine, parse_url
 
 REPO = Path(__file__).resolve().parents[1]
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
@@ -203,6 +204,14 @@ def test_open_store_raises_rope_mismatch_naming_both(tmp_path: Path) -> None:
         open_store(f"sqlite:///{path}", readonly=True)
 
 
+# rows as revision 0001 wrote them ("cross" is a keyword on PostgreSQL, quoted everywhere)
+_OLD_STATE = "INSERT INTO topological_states (id, key, p_data, \"cross\") VALUES (1, '[]', '[]', 0)"
+_OLD_CONFIGURATION = (
+    'INSERT INTO configurations (id, run_id, state_id, "cross", q, points, created_at) '
+    "VALUES (1, NULL, 1, 0, x'', x'', '2026-01-01 00:00:00.000000')"
+)
+
+
 def test_a_store_made_before_the_rope_profile_is_tagged_21_links(tmp_path: Path) -> None:
     """A database with configurations written before revision 0013 was made on the paper's rope; one with
     none is tagged by the first process that writes to it."""
@@ -212,16 +221,8 @@ def test_a_store_made_before_the_rope_profile_is_tagged_21_links(tmp_path: Path)
         with engine.begin() as conn:
             command.upgrade(alembic_config(conn), "0001")
             if path == old:
-                state = (
-                    "INSERT INTO topological_states (id, key, p_data, \"cross\") VALUES (1, '[]', '[]', 0)"
-                )
-                conn.execute(text(state))
-                conn.execute(
-                    text(
-                        'INSERT INTO configurations (id, run_id, state_id, "cross", q, points, created_at) '
-                        "VALUES (1, NULL, 1, 0, x'', x'', '2026-01-01 00:00:00.000000')"
-                    )
-                )
+                conn.execute(text(_OLD_STATE))
+                conn.execute(text(_OLD_CONFIGURATION))
         engine.dispose()
     # the migration alone (no process rope recorded yet): only the store with data is tagged
     for path in (old, empty):
@@ -237,6 +238,25 @@ def test_a_store_made_before_the_rope_profile_is_tagged_21_links(tmp_path: Path)
     with open_store(f"sqlite:///{old}") as store, store.engine.connect() as conn:
         revisions = {r[0] for r in conn.execute(text("SELECT version_num FROM alembic_version"))}
     assert revisions == head_revisions() and "0013" in revisions
+
+
+def test_a_store_from_before_the_rope_profile_refuses_another_rope_before_upgrading(tmp_path: Path) -> None:
+    path = tmp_path / "old.db"
+    engine = make_engine(parse_url(f"sqlite:///{path}"))  # as twisted made it (WAL mode)
+    with engine.begin() as conn:
+        command.upgrade(alembic_config(conn), "0001")
+        conn.execute(text(_OLD_STATE))
+        conn.execute(text(_OLD_CONFIGURATION))
+    engine.dispose()
+    before = _digest(path)
+    for args in (["db"], ["collect", "--hours", "0.01", "--workers", "1"]):
+        result = _twisted("31", "--db", f"sqlite:///{path}", *args)
+        assert result.returncode == 2, result.stderr
+        assert "holds data of a rope of 21 links x 0.04 m (0.84 m)" in _err(result)
+    assert _digest(path) == before  # not even upgraded
+    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+    assert conn.execute("SELECT version_num FROM alembic_version").fetchall() == [("0001",)]
+    conn.close()
 
 
 def test_twisted_db_shows_the_rope(tmp_path: Path) -> None:

@@ -254,8 +254,8 @@ class _Context:
 
 
 def _shipped_model_id(store: Any) -> int:
-    """The shipped model stored as ``shipped`` (once per database)."""
-    from twisted.model.registry import load_default_model, save_model
+    """The shipped model stored as ``shipped`` (once per database); EvalInputError on a rope it is not for."""
+    from twisted.model.registry import ModelError, load_default_model, save_model
     from twisted.store.training import TrainedModel
 
     with store.session() as session:
@@ -266,7 +266,11 @@ def _shipped_model_id(store: Any) -> int:
         )
     if found is not None:
         return int(found)
-    return save_model(store, load_default_model(), name="shipped")
+    try:
+        shipped = load_default_model("a lineage starts from the shipped model without --init-model, but ")
+    except ModelError as exc:
+        raise EvalInputError(f"{exc}, then give it as --init-model ID") from None
+    return save_model(store, shipped, name="shipped")
 
 
 def _rows(store: Any, lineage: str) -> list[ImproveGeneration]:

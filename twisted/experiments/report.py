@@ -22,6 +22,7 @@ from sqlalchemy import select
 
 from twisted.experiments.discretise import discretisation_lines
 from twisted.experiments.sensitivity import friction_label, friction_plots
+from twisted.rope import ROPE
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, Problem, ProblemSet
 
 __all__ = ["ReportFiles", "ResultRow", "load_results", "success_curve", "write_report"]
@@ -136,6 +137,7 @@ def _plot_curves(
     ax.set_title(title)
     ax_calls.set_title("the same, against simulator calls")
     ax.legend(fontsize=8, loc="upper left")
+    fig.text(0.99, 0.005, f"rope: {ROPE.name}", ha="right", va="bottom", fontsize=6, color="0.4")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)

@@ -48,7 +48,7 @@ Identification compares ``(alexander, jones)`` with the catalogue (the knots up 
 the granny and square knots); a diagram whose invariants match no entry is ``"unknown"`` (it still
 carries its invariants).
 Within the catalogue the pair separates every entry; a larger knot with the same pair would be
-misnamed, a risk that does not arise for the small diagrams a 21-link rope makes.
+misnamed, a risk that does not arise for the small diagrams a rope of a few dozen links makes.
 
 Modules:
 

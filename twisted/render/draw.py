@@ -30,7 +30,7 @@ from twisted.render.geometry import (  # noqa: E402
     rope_pieces,
     visit_labels,
 )
-from twisted.rope import N_LINKS  # noqa: E402
+from twisted.rope import N_LINKS, ROPE  # noqa: E402
 from twisted.topology import PData  # noqa: E402
 
 __all__ = [
@@ -154,18 +154,26 @@ def draw_gauss_diagram(ax: Axes, p_data: PData, *, title: str | None = None) -> 
     ax.set_title(title or f"Gauss diagram (arrow: over -> under)\n{p_data.key}", fontsize=8)
 
 
+def name_rope(fig: Figure) -> None:
+    """Write the rope profile (``ROPE.name``) in the figure's bottom right corner: figures of different
+    ropes are not comparable."""
+    fig.text(0.99, 0.005, f"rope: {ROPE.name}", ha="right", va="bottom", fontsize=6, color="0.4")
+
+
 def save_png(fig: Figure, path: str | Path, dpi: int = 120) -> Path:
-    """Save a figure as PNG (creating the folder) and close it."""
+    """Save a figure as PNG (creating the folder), naming the rope it shows, and close it."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
+    name_rope(fig)
     fig.savefig(out, dpi=dpi, bbox_inches="tight")
     plt.close(fig)
     return out
 
 
 def figure_to_array(fig: Figure, dpi: int = 100) -> npt.NDArray[np.uint8]:
-    """Rasterise a figure to an RGB uint8 array (for GIF frames); closes the figure."""
+    """Rasterise a figure to an RGB uint8 array (for GIF frames), naming the rope; closes the figure."""
     buf = io.BytesIO()
+    name_rope(fig)
     fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
     buf.seek(0)

@@ -528,6 +528,26 @@ def _stored_rope(conn: Connection) -> Any:
     return None if row is None else RopeProfile(int(row[0]), float(row[1]))
 
 
+def _peek_rope(conn: Connection) -> Any:
+    """The rope of a database at any revision: its ``rope_profile``, else (a database from before revision
+    0013) the default rope when it holds configurations, else None."""
+    from twisted.rope import DEFAULT_ROPE
+
+    tables = set(inspect(conn).get_table_names())
+    if "rope_profile" in tables:
+        return _stored_rope(conn)
+    if "configurations" in tables and conn.execute(text("SELECT 1 FROM configurations LIMIT 1")).first():
+        return DEFAULT_ROPE  # what migration 0013 will record
+    return None
+
+
+def _compare_rope(stored: Any, where: str) -> None:
+    from twisted.rope import ROPE
+
+    if stored is not None and stored != ROPE:
+        raise RopeMismatchError(rope_mismatch_message(where, stored))
+
+
 def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
     """Refuse (:class:`RopeMismatchError`) a database whose data was made on another rope than this
     process's; record this process's rope in one that has none yet, unless ``readonly``."""
@@ -556,8 +576,7 @@ def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
         except IntegrityError:  # PostgreSQL: another process inserted it meanwhile
             with engine.connect() as conn:
                 stored = _stored_rope(conn)
-    if stored is not None and stored != ROPE:
-        raise RopeMismatchError(rope_mismatch_message(where, stored))
+    _compare_rope(stored, where)
 
 
 def rope_mismatch_message(where: str, stored: Any) -> str:
@@ -617,6 +636,13 @@ def _open_store(
                     current = _inspect_connection(conn, where)
             except DBAPIError as exc:
                 raise StoreError(f"cannot connect to {where}: {exc.orig}") from exc
+        if upgrade and current and set(current) != heads:
+            # An older schema: refuse a process of another rope before the upgrade writes anything.
+            try:
+                with engine.connect() as conn:
+                    _compare_rope(_peek_rope(conn), where)
+            except DBAPIError as exc:
+                raise StoreError(f"cannot read the rope profile of {where}: {exc.orig}") from exc
         if upgrade and set(current) != heads:
             writer = make_engine(parsed) if readonly else engine  # PostgreSQL: read-only sessions only after
             try:
