@@ -12,11 +12,12 @@ Reads stored planner runs (every run; ``--set NAME``: those toward a goal of tha
    curl (the segment between a crossing's two adjacent visits; ``twisted.proposals.segment_bounds``) and of
    every other inner segment, as percentiles;
 3. per goal: its crossings and curls, whether a run reached it, the deepest sub-state of it that a run
-   reached, and its demand on the 21-link rope: curls times the curl loop plus the other inner segments
-   times the inner segment, at the 5th percentiles (the tightest the searches made them) and at the
-   medians (as they usually make them). A goal whose 5th-percentile demand exceeds the rope's links is
-   cramped: there is no room to make it the way the searches make curls; one over the rope at the
-   medians needs curls tighter than the searches usually make.
+   reached, and its demand on the rope (N_LINKS links: 21 unless TWISTED_ROPE says otherwise): curls
+   times the curl loop plus the other inner segments times the inner segment, at the 5th percentiles
+   (the tightest the searches made them) and at the medians (as they usually make them). A goal
+   whose 5th-percentile demand exceeds the rope's links is cramped: there is no room to make it the
+   way the searches make curls; one over the rope at the medians needs curls tighter than the
+   searches usually make.
 """
 
 from __future__ import annotations
