@@ -263,10 +263,12 @@ def main(
 
 def check_rope_env() -> None:
     """Exit 2, before any command opens or writes anything, when ``TWISTED_ROPE`` names no rope."""
-    from twisted.rope import DEFAULT_ROPE, ROPE_ENV, ROPE_ENV_ERROR
+    from twisted import rope
 
-    if ROPE_ENV_ERROR is not None:
-        fail(f"{ROPE_ENV_ERROR}; unset {ROPE_ENV} to run the default rope ({DEFAULT_ROPE.name})")
+    try:
+        rope.check_rope_env()
+    except ValueError as exc:
+        fail(f"{exc}; unset {rope.ROPE_ENV} to run the default rope ({rope.DEFAULT_ROPE.name})")
 
 
 def _with_global_options(command: Callable[..., Any]) -> Callable[..., Any]:

@@ -427,7 +427,7 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
         ctx.say(f"generation {row.generation}: resuming training run {row.training_run_id}")
         outcome = train(ctx.store, resume=True, command=f"twisted improve --name {config.lineage}")
     else:
-        collected = max_transition_id(ctx.store, removing=True) is not None
+        collected = max_transition_id(ctx.store, removing=TrainConfig.removing) is not None  # what it reads
         sources = ("collect", "search") if collected else ("search",)
         train_config = replace(
             TrainConfig(),

@@ -22,7 +22,6 @@ from sqlalchemy import select
 
 from twisted.experiments.discretise import discretisation_lines
 from twisted.experiments.sensitivity import friction_label, friction_plots
-from twisted.rope import ROPE
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, Problem, ProblemSet
 
 __all__ = ["ReportFiles", "ResultRow", "load_results", "success_curve", "write_report"]
@@ -107,6 +106,8 @@ def _plot_curves(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from twisted.render.draw import save_png
+
     fig, (ax, ax_calls) = plt.subplots(1, 2, figsize=(12.0, 4.2))
     t_max = max(k[2] for k in groups)
     grid = np.linspace(0.0, t_max, 400)
@@ -137,11 +138,7 @@ def _plot_curves(
     ax.set_title(title)
     ax_calls.set_title("the same, against simulator calls")
     ax.legend(fontsize=8, loc="upper left")
-    fig.text(0.99, 0.005, f"rope: {ROPE.name}", ha="right", va="bottom", fontsize=6, color="0.4")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return save_png(fig, path)  # names the rope in a corner, as every picture does
 
 
 def _safe(name: str) -> str:
