@@ -11,6 +11,7 @@ from rich.table import Table
 
 from cli.app import app, console, err_console, fail, open_db, seed_option, unwritable
 from cli.commands_problems import problems_app
+from cli.options import parse_device
 
 
 @app.command("improve")
@@ -52,6 +53,12 @@ def improve_command(
         Path,
         typer.Option("--goalsets", help="Goal-set files; final-, eval-, tune-*.json are evaluation goals."),
     ] = Path("goalsets"),
+    parallel: int = typer.Option(
+        1, "--parallel", help="Searches at once, each its own process on one core (training and tuning)."
+    ),
+    device: Annotated[
+        str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="Fine-tune on cpu or cuda.")
+    ] = "cpu",
 ) -> None:
     """Expert iteration: plan toward drawn training goals, fine-tune on the trees, score on a tuning set;
     each generation is a row of improve_generations (`twisted improve-status`)."""
@@ -77,6 +84,8 @@ def improve_command(
         batch_size=batch_size,
         init_model_id=init_model,
         goalsets_dir=str(goalsets),
+        parallel=parallel,
+        device=device,
     )
     try:
         config.check()

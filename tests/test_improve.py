@@ -88,7 +88,14 @@ def test_drawn_training_goals_never_hold_an_evaluation_goal() -> None:
 
 
 def test_bad_improve_options_exit_2_before_anything_is_written(sqlite_url: str) -> None:
-    for args in (["--goals", "0"], ["--draw", "u9"], ["--hours", "0"], ["--tune-iterations", "0"]):
+    for args in (
+        ["--goals", "0"],
+        ["--draw", "u9"],
+        ["--hours", "0"],
+        ["--tune-iterations", "0"],
+        ["--parallel", "0"],
+        ["--device", "tpu"],
+    ):
         code, out = _cli(sqlite_url, "improve", "--tune-set", "t", *args)
         assert code == 2, (args, out)
     assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
@@ -142,6 +149,43 @@ def test_a_generation_trained_on_a_tiny_store_loads_and_plans(sqlite_url: str, t
     assert wide.exit_code == 0 and "tiny g1 (parent 1)" in wide.output and "tiny g0" in wide.output, (
         wide.output
     )
+
+
+@pytest.mark.slow
+def test_searches_in_parallel_processes_are_recorded_in_goal_order(sqlite_url: str, tmp_path: Path) -> None:
+    """``parallel=2``: the training goals' searches run in spawned processes on the same store, and each
+    outcome is recorded under its goal's index, whichever ends first."""
+    from twisted.store.models import Run
+
+    goals = _one_crossing_goals()
+    for path in (_write_set(tmp_path, "tune-p", goals[:1]), _write_set(tmp_path, "train-p", goals[1:4])):
+        assert _cli(sqlite_url, "problems", "import", str(path))[0] == 0
+    config = ImproveConfig(
+        tune_set="tune-p",
+        lineage="two",
+        hours=0.5,
+        generations=1,
+        train_set="train-p",
+        goal_timeout_s=30.0,
+        goal_iterations=4,
+        tune_iterations=2,
+        tune_timeout_s=30.0,
+        epochs=1,
+        batch_size=16,
+        goalsets_dir=str(tmp_path / "none"),
+        parallel=2,
+    )
+    with open_store(sqlite_url) as store:
+        rows = improve(store, config)
+        assert [r.status for r in rows] == ["finished", "finished"]
+        planned = rows[1].training_goals
+        assert [o["index"] for o in planned] == [0, 1, 2]
+        assert [o["goal"] for o in planned] == [json.dumps(g, separators=(",", ":")) for g in goals[1:4]]
+        assert [o["seed"] for o in planned] == [1000, 1001, 1002]
+        with store.session() as session:
+            runs = {r.id: r for r in session.scalars(select(Run))}
+        assert all(runs[o["run_id"]].parameters["phase"] == "train" for o in planned)
+        assert len({o["run_id"] for o in planned}) == 3 and rows[1].tune_runs == 1
 
 
 def _goal(p_data: object):  # noqa: ANN202 - a Goal

@@ -89,6 +89,10 @@ class ImproveConfig:
     batch_size: int = 128
     init_model_id: int | None = None
     goalsets_dir: str = "goalsets"
+    # how it runs, not what it learns: searches at once (each its own spawned process, one core) and the
+    # torch device fine-tuning runs on
+    parallel: int = 1
+    device: str = "cpu"
 
     def check(self) -> None:
         """Raise :class:`EvalInputError` naming the option that is out of range."""
@@ -113,6 +117,7 @@ class ImproveConfig:
             ("--tune-seeds", self.tune_seeds),
             ("--epochs", self.epochs),
             ("--batch-size", self.batch_size),
+            ("--parallel", self.parallel),
         ):
             if count < 1:
                 raise EvalInputError(f"{name} must be at least 1, got {count}")
@@ -328,34 +333,41 @@ def _id(model_id: int | None) -> int:
     return int(model_id)
 
 
-def _plan(
-    ctx: _Context,
-    goal: Goal,
-    model_id: int,
-    seed: int,
-    timeout_s: float,
-    iterations: int | None,
-    tags: dict[str, Any],
-) -> dict[str, Any]:
+@dataclass(frozen=True)
+class _Search:
+    """One search of a phase: the ``index``-th goal of its list, with its model, seed and budget."""
+
+    index: int
+    goal: str  # the goal's spec
+    model_id: int
+    seed: int
+    timeout_s: float
+    iterations: int | None
+    tags: dict[str, Any]  # stored with the run's parameters
+    label: str = ""  # what the loop says when it starts
+
+
+def _plan(store: Any, job: _Search) -> dict[str, Any]:
     """One search on one core through the planner's public session API; its outcome as a dict."""
     from twisted.planner import PlannerOptions, curve_sampler, start_search
     from twisted.sim import SimPool
 
-    sampler, used = curve_sampler(ctx.store, "twisted", model_id)
+    sampler, used = curve_sampler(store, "twisted", job.model_id)
     with SimPool(1) as pool:
         search = start_search(
-            ctx.store,
-            goal,
-            PlannerOptions(seed=seed),
+            store,
+            make_goal(job.goal),
+            PlannerOptions(seed=job.seed),
             pool,
             sampler=sampler,
-            extra_parameters={"model_id": used, **tags},
+            extra_parameters={"model_id": used, **job.tags},
         )
-        result = search.run(timeout_s=timeout_s, max_iterations=iterations)
+        result = search.run(timeout_s=job.timeout_s, max_iterations=job.iterations)
     calls_to_solve = result.path[-1].sim_call if result.solved and result.path else None
     return {
-        "goal": goal.spec,
-        "seed": seed,
+        "index": job.index,
+        "goal": job.goal,
+        "seed": job.seed,
         "run_id": result.run_id,
         "status": result.status,
         "solved": result.solved,
@@ -367,10 +379,64 @@ def _plan(
     }
 
 
+def _plan_in_process(db_url: str, job: _Search) -> dict[str, Any]:
+    """:func:`_plan` in a spawned worker process: its own store connection, one torch thread."""
+    import torch
+
+    from twisted.store import open_store
+
+    torch.set_num_threads(1)
+    with open_store(db_url) as store:
+        return _plan(store, job)
+
+
+def _indexed(outcomes: Sequence[dict[str, Any]] | None) -> list[dict[str, Any]]:
+    """Recorded outcomes, each with its search's ``index`` (rows stored before the index was are in
+    order)."""
+    return [{**o, "index": int(o.get("index", i))} for i, o in enumerate(outcomes or [])]
+
+
+def _plan_all(ctx: _Context, jobs: Sequence[_Search], record: Callable[[dict[str, Any]], None]) -> bool:
+    """Run the searches, ``ctx.config.parallel`` at once (one in this process when 1), calling
+    ``record(outcome)`` as each ends; False when the time ran out before every search started."""
+    parallel = ctx.config.parallel
+    if parallel <= 1:
+        for job in jobs:
+            if ctx.out_of_time():
+                return False
+            ctx.say(job.label)
+            record(_plan(ctx.store, job))
+        return True
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+
+    db_url = ctx.store.url.render_as_string(hide_password=False)
+    pending = list(jobs)
+    running: set[Future[dict[str, Any]]] = set()
+    started_all = True
+    with ProcessPoolExecutor(
+        max_workers=parallel, mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1
+    ) as pool:
+        while pending or running:
+            while pending and len(running) < parallel:
+                if ctx.out_of_time():
+                    started_all, pending = False, []
+                    break
+                job = pending.pop(0)
+                ctx.say(job.label)
+                running.add(pool.submit(_plan_in_process, db_url, job))
+            if not running:
+                break
+            finished, running = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                record(future.result())
+    return started_all
+
+
 def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
     """Plan toward the generation's training goals; False when the time ran out first."""
     config = ctx.config
-    done = list(row.training_goals or [])
+    done = _indexed(row.training_goals)
     if not done and not (row.data or {}).get("goals"):
         if config.train_set is not None:
             with ctx.store.session() as session:
@@ -382,25 +448,33 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
         _update(ctx.store, row.id, data={**(row.data or {}), "goals": [g.spec for g in goals]})
         row.data = {**(row.data or {}), "goals": [g.spec for g in goals]}
     specs = list(row.data["goals"])
-    for i, spec in enumerate(specs):
-        if i < len(done):
-            continue
-        if ctx.out_of_time():
-            return False
-        goal = make_goal(spec)
-        assert not (ctx.eval_keys & set(goal.keys)), "a training goal is an evaluation goal"
-        ctx.say(f"generation {row.generation}: training goal {i + 1}/{len(specs)} ({goal.cross} crossings)")
-        outcome = _plan(
-            ctx,
-            goal,
-            _id(row.parent_model_id),
+    for spec in specs:
+        assert not (ctx.eval_keys & set(make_goal(spec).keys)), "a training goal is an evaluation goal"
+    recorded = {o["index"] for o in done}
+    tags = {"improve": config.lineage, "generation": row.generation, "phase": "train"}
+    jobs = [
+        _Search(
+            index=i,
+            goal=spec,
+            model_id=_id(row.parent_model_id),
             seed=row.generation * 1000 + i,
             timeout_s=config.goal_timeout_s,
             iterations=config.goal_iterations,
-            tags={"improve": config.lineage, "generation": row.generation, "phase": "train"},
+            tags=tags,
+            label=f"generation {row.generation}: training goal {i + 1}/{len(specs)} "
+            f"({make_goal(spec).cross} crossings)",
         )
+        for i, spec in enumerate(specs)
+        if i not in recorded
+    ]
+
+    def record(outcome: dict[str, Any]) -> None:
         done.append(outcome)
-        _update(ctx.store, row.id, training_goals=done)
+        done.sort(key=lambda o: int(o["index"]))
+        _update(ctx.store, row.id, training_goals=list(done))
+
+    if not _plan_all(ctx, jobs, record):
+        return False
     _update(ctx.store, row.id, training_goals=done, status="training")
     return True
 
@@ -416,8 +490,9 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
     from twisted.model.train import train
     from twisted.store.training import TrainingRun
 
-    torch.set_num_threads(1)  # one core: the loop is measured on one
     config = ctx.config
+    if config.device == "cpu":
+        torch.set_num_threads(1)  # one core: the loop is measured on one
     if row.training_run_id is not None:
         with ctx.store.session() as session:
             run = session.get(TrainingRun, row.training_run_id)
@@ -425,7 +500,9 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
         if status == "finished":
             return _after_training(ctx, row)
         ctx.say(f"generation {row.generation}: resuming training run {row.training_run_id}")
-        outcome = train(ctx.store, resume=True, command=f"twisted improve --name {config.lineage}")
+        outcome = train(
+            ctx.store, resume=True, device=config.device, command=f"twisted improve --name {config.lineage}"
+        )
     else:
         collected = max_transition_id(ctx.store, removing=TrainConfig.removing) is not None  # what it reads
         sources = ("collect", "search") if collected else ("search",)
@@ -446,6 +523,7 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
             ctx.store,
             train_config,
             command=f"twisted improve --name {config.lineage} (generation {row.generation})",
+            device=config.device,
             log=ctx.say,
         )
         _update(ctx.store, row.id, training_run_id=outcome.training_run_id)
@@ -484,32 +562,39 @@ def _phase_score(ctx: _Context, row: ImproveGeneration) -> bool:
         goals = _set_goals(session, config.tune_set)
     if config.tune_goals is not None:
         goals = goals[: config.tune_goals]
-    results = list(row.tune_results or [])
+    results = _indexed(row.tune_results)
+    recorded = {o["index"] for o in results}
     todo = [(g, s) for s in range(config.tune_seeds) for g in goals]
-    for i, (goal, seed) in enumerate(todo):
-        if i < len(results):
-            continue
-        if ctx.out_of_time():
-            return False
-        ctx.say(f"generation {row.generation}: tuning goal {i + 1}/{len(todo)}")
-        outcome = _plan(
-            ctx,
-            goal,
-            _id(row.model_id),
+    tags = {"improve": config.lineage, "generation": row.generation, "phase": "tune"}
+    jobs = [
+        _Search(
+            index=i,
+            goal=goal.spec,
+            model_id=_id(row.model_id),
             seed=seed,
             timeout_s=config.tune_timeout_s,
             iterations=config.tune_iterations,
-            tags={"improve": config.lineage, "generation": row.generation, "phase": "tune"},
+            tags=tags,
+            label=f"generation {row.generation}: tuning goal {i + 1}/{len(todo)}",
         )
+        for i, (goal, seed) in enumerate(todo)
+        if i not in recorded
+    ]
+
+    def record(outcome: dict[str, Any]) -> None:
         results.append(outcome)
+        results.sort(key=lambda o: int(o["index"]))
         _update(
             ctx.store,
             row.id,
-            tune_results=results,
+            tune_results=list(results),
             tune_runs=len(results),
             tune_solved=sum(r["solved"] for r in results),
             tune_calls=sum(r["sim_calls"] for r in results),
         )
+
+    if not _plan_all(ctx, jobs, record):
+        return False
     _update(ctx.store, row.id, status="finished")
     return True
 
