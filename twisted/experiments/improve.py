@@ -442,6 +442,10 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
             with ctx.store.session() as session:
                 goals = _set_goals(session, config.train_set)
         else:
+            from twisted.store.knots import CACHED_CROSSINGS, load_states_by_type
+
+            for crossings in sorted({DISTRIBUTIONS[d] for d in config.distributions} & set(CACHED_CROSSINGS)):
+                load_states_by_type(ctx.store, crossings)  # the enumeration, when the store keeps it
             goals = training_goals(
                 config.distributions, config.goals, config.seed, row.generation, ctx.eval_keys
             )
