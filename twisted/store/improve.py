@@ -26,6 +26,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
+from twisted.store import training as _training  # noqa: F401  (the models and training_runs tables named below)
 from twisted.store.models import Base, utcnow
 
 __all__ = ["IMPROVE_STATUSES", "ImproveGeneration", "lineage_labels"]
