@@ -210,3 +210,15 @@ def test_every_store_module_maps_on_its_own() -> None:
     for module in modules:
         done = subprocess.run([sys.executable, "-c", code, module], capture_output=True, text=True)
         assert done.returncode == 0, (module, done.stderr[-500:])
+
+
+def test_outcomes_stored_before_the_index_keep_their_order() -> None:
+    """Rows written before outcomes carried their goal's index are in goal order: a resumed phase reads
+    the i-th as goal i, and skips those."""
+    from twisted.experiments.improve import _indexed
+
+    old = [{"goal": "a", "solved": True}, {"goal": "b", "solved": False}]
+    assert [o["index"] for o in _indexed(old)] == [0, 1]
+    mixed = [{"goal": "c", "index": 3}, {"goal": "a", "index": 0}]
+    assert [o["index"] for o in _indexed(mixed)] == [3, 0]
+    assert _indexed(None) == []
