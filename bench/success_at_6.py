@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 
 import numpy as np
@@ -120,7 +121,7 @@ def main() -> None:
     wall = time.perf_counter() - t0
     k = args.k
     print(
-        f"{'step':6s} {'n':>5s} {'model@' + str(k):>9s} {'random@' + str(k):>10s} {'ratio':>6s}"
+        f"{'step':6s} {'n':>5s} {'model@' + str(k):>9s} {'se':>6s} {'random@' + str(k):>10s} {'ratio':>6s}"
         f" {'random@' + str(k) + ' expected':>18s} {'ratio':>6s}"
         + (f" {'shipped@' + str(k):>10s}" if shipped is not None else "")
     )
@@ -128,13 +129,14 @@ def main() -> None:
     for step in args.steps:
         r = results.get(step)
         if r is None:
-            print(f"{step:6s} {0:5d} {'-':>9s} {'-':>10s} {'-':>6s}")
+            print(f"{step:6s} {0:5d} {'-':>9s} {'-':>6s} {'-':>10s} {'-':>6s}")
             continue
         ratio = r.model_rate / r.random_rate if r.solved_random else float("nan")
         ratio_expected = r.model_rate / r.random_expected if r.random_expected > 0 else float("nan")
         shipped_rate = shipped[step].model_rate if shipped is not None else None
+        se = math.sqrt(r.model_rate * (1.0 - r.model_rate) / r.n)  # binomial standard error of model@k
         print(
-            f"{step:6s} {r.n:5d} {r.model_rate:9.3f} {r.random_rate:10.3f} {ratio:6.2f}"
+            f"{step:6s} {r.n:5d} {r.model_rate:9.3f} {se:6.3f} {r.random_rate:10.3f} {ratio:6.2f}"
             f" {r.random_expected:18.3f} {ratio_expected:6.2f}"
             + (f" {shipped_rate:10.3f}" if shipped_rate is not None else "")
         )
@@ -143,6 +145,7 @@ def main() -> None:
                 "step": step,
                 "n": r.n,
                 "model": r.model_rate,
+                "model_se": se,
                 "random": r.random_rate,
                 "random_expected": r.random_expected,
                 "random_curves": r.random_curves,
@@ -155,7 +158,9 @@ def main() -> None:
     sims += sum(k * r.n for r in shipped.values()) if shipped is not None else 0
     print(
         f"{sims} simulations in {wall:.0f} s on {args.workers} workers; 'random@{k} expected' estimates each "
-        f"transition's per-curve hit rate p from all its random curves: mean(1 - (1 - p)^{k})"
+        f"transition's per-curve hit rate p from all its random curves: mean(1 - (1 - p)^{k}); 'se' is the "
+        f"standard error of model@{k}, sqrt(p (1 - p) / n); the gap between two models' rates has a standard "
+        "error of about sqrt(se1^2 + se2^2)"
     )
     if args.json:
         with open(args.json, "w") as fh:
