@@ -200,7 +200,9 @@ def test_every_store_module_maps_on_its_own() -> None:
     import subprocess
     import sys
 
-    modules = sorted(p.stem for p in Path("twisted/store").glob("*.py") if p.stem != "__init__")
+    store_dir = Path(__file__).resolve().parents[1] / "twisted" / "store"
+    modules = sorted(p.stem for p in store_dir.glob("*.py") if p.stem != "__init__")
+    assert "improve" in modules and "training" in modules
     code = (
         "import importlib, sys\n"
         "importlib.import_module('twisted.store.' + sys.argv[1])\n"
@@ -213,8 +215,8 @@ def test_every_store_module_maps_on_its_own() -> None:
 
 
 def test_outcomes_stored_before_the_index_keep_their_order() -> None:
-    """Rows written before outcomes carried their goal's index are in goal order: a resumed phase reads
-    the i-th as goal i, and skips those."""
+    """Rows written before outcomes carried their goal's index are in goal order: the i-th reads as goal
+    i (and a resumed phase skips the indices read)."""
     from twisted.experiments.improve import _indexed
 
     old = [{"goal": "a", "solved": True}, {"goal": "b", "solved": False}]
