@@ -101,6 +101,29 @@ def test_bad_improve_options_exit_2_before_anything_is_written(sqlite_url: str) 
     assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
 
 
+def _one_generation(
+    db: str, tmp_path: Path, suffix: str, train_goals: list[object], **options: object
+) -> ImproveConfig:
+    """A lineage of one generation, imported into ``db``: tuning set ``tune-SUFFIX`` (the first 1-crossing
+    goal), training set ``train-SUFFIX``, 30 s budgets, one epoch; ``options`` add to the config."""
+    tune = _write_set(tmp_path, f"tune-{suffix}", _one_crossing_goals()[:1])
+    train = _write_set(tmp_path, f"train-{suffix}", train_goals)
+    for path in (tune, train):
+        assert _cli(db, "problems", "import", str(path))[0] == 0
+    return ImproveConfig(
+        tune_set=f"tune-{suffix}",
+        hours=0.5,
+        generations=1,
+        train_set=f"train-{suffix}",
+        goal_timeout_s=30.0,
+        tune_timeout_s=30.0,
+        epochs=1,
+        batch_size=16,
+        goalsets_dir=str(tmp_path / "none"),
+        **options,
+    )
+
+
 @pytest.mark.slow
 def test_a_generation_trained_on_a_tiny_store_loads_and_plans(sqlite_url: str, tmp_path: Path) -> None:
     """Generation 1 of a tiny lineage (two 1-crossing goals, one epoch) is a stored model that plans."""
@@ -109,23 +132,8 @@ def test_a_generation_trained_on_a_tiny_store_loads_and_plans(sqlite_url: str, t
     from twisted.sim import SimPool
 
     goals = _one_crossing_goals()
-    tune = _write_set(tmp_path, "tune-z", goals[:1])
-    train = _write_set(tmp_path, "train-z", goals[1:3])
-    for path in (tune, train):
-        assert _cli(sqlite_url, "problems", "import", str(path))[0] == 0
-    config = ImproveConfig(
-        tune_set="tune-z",
-        lineage="tiny",
-        hours=0.5,
-        generations=1,
-        train_set="train-z",
-        goal_timeout_s=30.0,
-        goal_iterations=8,
-        tune_iterations=3,
-        tune_timeout_s=30.0,
-        epochs=1,
-        batch_size=16,
-        goalsets_dir=str(tmp_path / "none"),
+    config = _one_generation(
+        sqlite_url, tmp_path, "z", goals[1:3], lineage="tiny", goal_iterations=8, tune_iterations=3
     )
     with open_store(sqlite_url) as store:
         rows = improve(store, config)
@@ -158,22 +166,8 @@ def test_searches_in_parallel_processes_are_recorded_in_goal_order(sqlite_url: s
     from twisted.store.models import Run
 
     goals = _one_crossing_goals()
-    for path in (_write_set(tmp_path, "tune-p", goals[:1]), _write_set(tmp_path, "train-p", goals[1:4])):
-        assert _cli(sqlite_url, "problems", "import", str(path))[0] == 0
-    config = ImproveConfig(
-        tune_set="tune-p",
-        lineage="two",
-        hours=0.5,
-        generations=1,
-        train_set="train-p",
-        goal_timeout_s=30.0,
-        goal_iterations=4,
-        tune_iterations=2,
-        tune_timeout_s=30.0,
-        epochs=1,
-        batch_size=16,
-        goalsets_dir=str(tmp_path / "none"),
-        parallel=2,
+    config = _one_generation(
+        sqlite_url, tmp_path, "p", goals[1:4], lineage="two", goal_iterations=4, tune_iterations=2, parallel=2
     )
     with open_store(sqlite_url) as store:
         rows = improve(store, config)

@@ -452,8 +452,9 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
         _update(ctx.store, row.id, data={**(row.data or {}), "goals": [g.spec for g in goals]})
         row.data = {**(row.data or {}), "goals": [g.spec for g in goals]}
     specs = list(row.data["goals"])
-    for spec in specs:
-        assert not (ctx.eval_keys & set(make_goal(spec).keys)), "a training goal is an evaluation goal"
+    goals = [make_goal(spec) for spec in specs]
+    for goal in goals:
+        assert not (ctx.eval_keys & set(goal.keys)), "a training goal is an evaluation goal"
     recorded = {o["index"] for o in done}
     tags = {"improve": config.lineage, "generation": row.generation, "phase": "train"}
     jobs = [
@@ -465,10 +466,9 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
             timeout_s=config.goal_timeout_s,
             iterations=config.goal_iterations,
             tags=tags,
-            label=f"generation {row.generation}: training goal {i + 1}/{len(specs)} "
-            f"({make_goal(spec).cross} crossings)",
+            label=f"generation {row.generation}: training goal {i + 1}/{len(specs)} ({goal.cross} crossings)",
         )
-        for i, spec in enumerate(specs)
+        for i, (spec, goal) in enumerate(zip(specs, goals, strict=True))
         if i not in recorded
     ]
 
