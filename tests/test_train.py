@@ -435,3 +435,26 @@ def test_cli_fine_tuning_checks_its_starting_model_before_writing(
     assert result.exit_code == 0, result.output
     listed = {m["id"]: m for m in json.loads(result.output)}
     assert listed[2]["metrics"]["init_model_id"] == 1 and "init_model_id" not in listed[1]["metrics"]
+
+
+def test_a_training_batch_stays_on_the_nets_device() -> None:
+    """Training on a GPU (``--device cuda``) needs every tensor a batch makes on the net's device. The
+    ``meta`` device stands in for one here: a tensor left on the CPU makes PyTorch refuse the mix, as
+    CUDA does (a constant built without ``device=`` once broke ``improve --device cuda``)."""
+    from twisted.model.data import transitions_from_samples
+    from twisted.model.encoding import preprocess
+    from twisted.model.train import batch_condition, batch_losses
+    from twisted.topology import parse_p_data
+
+    net = InverseNet(SMALL).to("meta")
+    points = np.stack([random_rope(i) for i in range(2)]).astype(np.float32)
+    curves = np.array([[3, 0.05, 0.1, 0.1], [5, 0.05, -0.1, 0.1]], np.float32)
+    p0, p1 = parse_p_data("[]"), parse_p_data('[[1,"O",2,"+"],[2,"U",1,"+"]]')
+    data = transitions_from_samples(points, curves, [p0, p0], [p1, p1]).to("meta")
+    index = torch.arange(2, device="meta")
+    for variant in (torch.zeros(2, dtype=torch.long, device="meta"), torch.tensor([1, 3], device="meta")):
+        losses = batch_losses(net, data, index, variant)
+        assert losses["loss"].device.type == "meta" and losses["loss"].shape == (2,)
+        logits = net.link_logits(preprocess(data.points[index]), batch_condition(data, index, variant))
+        assert logits.device.type == "meta"
+        losses["loss"].mean().backward()

@@ -342,7 +342,8 @@ def preprocess(points: torch.Tensor | npt.ArrayLike) -> Preprocessed:
     features = torch.cat([canon.flatten(1), cx.pairs, cx.visits], dim=1)
     direction = canon[:, 1:, :2] - canon[:, :-1, :2]
     direction = direction / direction.norm(dim=2, keepdim=True).clamp_min(1e-6)
-    index = torch.arange(N_LINKS, dtype=pts.dtype).expand(pts.shape[0], -1)[..., None] / (N_LINKS - 1)
+    index = torch.arange(N_LINKS, dtype=pts.dtype, device=pts.device) / (N_LINKS - 1)
+    index = index.expand(pts.shape[0], -1)[..., None]
     link_tokens = torch.cat([0.5 * (canon[:, 1:] + canon[:, :-1]), direction, index, cx.per_link], dim=2)
     return Preprocessed(
         features=features, link_tokens=link_tokens, visit_arcs=cx.arcs, centre=centre, cos=cos, sin=sin
