@@ -142,6 +142,16 @@ class PlannerOptions:
         before=0.0,
         before_in_evals=True,
     )
+    feasibility: float = option(
+        0.0,
+        "Weight of the learned feasibility (the odds that a plan step succeeds from a node's rope, over its "
+        "move kind's rate; twisted.model.feasibility): node, plan and crs state choices weigh it to this "
+        "power, in place of the R1 room (0: off, the R1 room as --r1-room says).",
+        bounds=(0, 4),
+        commands=EVALUATED,
+        before=0.0,
+        before_in_evals=True,
+    )
     tighten: bool = option(
         False,
         "Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a little, "
