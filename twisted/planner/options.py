@@ -146,7 +146,7 @@ class PlannerOptions:
         0.0,
         "Weight of the learned feasibility (the odds that a plan step succeeds from a node's rope, over its "
         "move kind's rate; twisted.model.feasibility): node, plan and crs state choices weigh it to this "
-        "power, in place of the R1 room (0: off, the R1 room as --r1-room says).",
+        "power for Cross and R2 steps, R1 steps keep the R1 room (0: off).",
         bounds=(0, 4),
         commands=EVALUATED,
         before=0.0,

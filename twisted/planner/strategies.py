@@ -150,23 +150,26 @@ class R1Room:
 
 
 class FeasibilityRoom:
-    """The learned odds that a plan step succeeds from a node's rope (:mod:`twisted.model.feasibility`), in
-    place of the R1 room: a node weighs ``ratio ** power`` for the step asked of it, where ``ratio`` is its
+    """The learned odds that a plan step succeeds from a node's rope (:mod:`twisted.model.feasibility`);
+    R1 steps keep the R1 room (``r1``; none: the odds for them too). A node weighs ``ratio ** power`` for
+    the step asked of it, where ``ratio`` is its
     odds over the rate of the step's group (move kind, crossings), within [0.05, 5]; a plan weighs the best
     ratio any node of its state has for its first step, and the crs state choice the best plan's. The
     odds are cached per (node, next state), the nodes' features per node."""
 
-    def __init__(self, model: Any, power: float) -> None:
+    def __init__(self, model: Any, power: float, r1: R1Room | None = None) -> None:
         if not power > 0.0:
             raise ValueError(f"FeasibilityRoom needs a positive power, got {power}")
-        self.model, self.power = model, power
+        self.model, self.power, self.r1 = model, power, r1
         self._geometry: dict[int, Any] = {}  # node index -> its geometry features
         self._ratios: dict[tuple[int, str], float] = {}  # (node index, next state) -> weight
         self._plan_rooms: dict[str, tuple[int, list[float]]] = {}
 
     def node_weights(
         self, search: SearchView, indices: list[int], next_state: PData, move: Any
-    ) -> list[float]:
+    ) -> list[float] | None:
+        if self.r1 is not None and move.kind == "R1":
+            return self.r1.node_weights(search, indices, next_state, move)
         key = next_state.key
         todo = [i for i in indices if (i, key) not in self._ratios]
         if todo:
@@ -204,7 +207,8 @@ class FeasibilityRoom:
                 rooms.append(1.0)
                 continue
             if next_state.key not in best:
-                best[next_state.key] = max(self.node_weights(search, indices, next_state, move))
+                weights = self.node_weights(search, indices, next_state, move)
+                best[next_state.key] = 1.0 if weights is None else max(weights)
             rooms.append(best[next_state.key])
         self._plan_rooms[s] = (len(indices), rooms)
         return rooms
@@ -216,6 +220,8 @@ class FeasibilityRoom:
         for pair in [pair for pair in self._ratios if pair[0] >= committed]:
             del self._ratios[pair]
         self._plan_rooms.clear()
+        if self.r1 is not None:
+            self.r1.forget(committed)
 
 
 class Room(Protocol):
@@ -546,13 +552,14 @@ def default_parts(
         if options.tighten:
             raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
         goal_test = StateMatch(goal)
-    room: Room | None = R1Room(options.r1_room) if options.r1_room > 0.0 else None
+    r1_room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
+    room: Room | None = r1_room
     if options.feasibility > 0.0 and options.planner == "twisted":
         if feasibility is None:
             from twisted.model.feasibility import load_default_feasibility
 
             feasibility = load_default_feasibility()
-        room = FeasibilityRoom(feasibility, options.feasibility)
+        room = FeasibilityRoom(feasibility, options.feasibility, r1_room)
     states: StateSelection
     plans: PlanSelection
     if options.heuristic == "ucb":
