@@ -133,107 +133,11 @@ class R1Room:
         self._plan_rooms[s] = (len(indices), best, rooms)
         return rooms
 
-    def node_weights(
-        self, search: SearchView, indices: list[int], next_state: PData, move: Any
-    ) -> list[float] | None:
-        """Per node of ``indices``: its room for an R1 ``move``; None for other moves (no weighting)."""
-        if move.kind != "R1":
-            return None
-        nodes = search.tree.nodes
-        return [self.node_weight(nodes[i], move.segment) for i in indices]
-
     def forget(self, committed: int) -> None:
         """Drop what was cached about the nodes from ``committed`` on (an iteration rolled back)."""
         for index in [index for index in self._bounds if index >= committed]:
             del self._bounds[index]
         self._plan_rooms.clear()
-
-
-class FeasibilityRoom:
-    """The learned odds that a plan step succeeds from a node's rope (:mod:`twisted.model.feasibility`);
-    R1 steps keep the R1 room (``r1``; none: the odds for them too). A node weighs ``ratio ** power`` for
-    the step asked of it, where ``ratio`` is its
-    odds over the rate of the step's group (move kind, crossings), within [0.05, 5]; a plan weighs the best
-    ratio any node of its state has for its first step, and the crs state choice the best plan's. The
-    odds are cached per (node, next state), the nodes' features per node."""
-
-    def __init__(self, model: Any, power: float, r1: R1Room | None = None) -> None:
-        if not power > 0.0:
-            raise ValueError(f"FeasibilityRoom needs a positive power, got {power}")
-        self.model, self.power, self.r1 = model, power, r1
-        self._geometry: dict[int, Any] = {}  # node index -> its geometry features
-        self._ratios: dict[tuple[int, str], float] = {}  # (node index, next state) -> weight
-        self._plan_rooms: dict[str, tuple[int, list[float]]] = {}
-
-    def node_weights(
-        self, search: SearchView, indices: list[int], next_state: PData, move: Any
-    ) -> list[float] | None:
-        if self.r1 is not None and move.kind == "R1":
-            return self.r1.node_weights(search, indices, next_state, move)
-        key = next_state.key
-        todo = [i for i in indices if (i, key) not in self._ratios]
-        if todo:
-            import torch
-
-            from twisted.model.feasibility import geometry_features
-
-            nodes = search.tree.nodes
-            new = [i for i in todo if i not in self._geometry]
-            if new:
-                for i, row in zip(
-                    new, geometry_features(np.stack([nodes[i].points for i in new])), strict=True
-                ):
-                    self._geometry[i] = row
-            p_from = nodes[todo[0]].p_data
-            odds = self.model.odds_of(
-                torch.stack([self._geometry[i] for i in todo]), p_from, next_state, move
-            )
-            for i, ratio in zip(todo, self.model.ratios(odds, p_from, move), strict=True):
-                self._ratios[(i, key)] = float(ratio) ** self.power
-        return [self._ratios[(i, key)] for i in indices]
-
-    def plan_rooms(self, search: SearchView, s: str) -> list[float]:
-        """Per plan of ``s``: the best weight any node of ``s`` has for its first step (1 for a removing
-        step). Recomputed only when ``s`` gained nodes."""
-        indices = search.tree.by_state[s]
-        cached = self._plan_rooms.get(s)
-        if cached is not None and cached[0] == len(indices):
-            return cached[1]
-        best: dict[str, float] = {}
-        rooms = []
-        for plan in search.plans[s]:
-            move, next_state = plan.moves[0], plan.states[1]
-            if move.remove:
-                rooms.append(1.0)
-                continue
-            if next_state.key not in best:
-                weights = self.node_weights(search, indices, next_state, move)
-                best[next_state.key] = 1.0 if weights is None else max(weights)
-            rooms.append(best[next_state.key])
-        self._plan_rooms[s] = (len(indices), rooms)
-        return rooms
-
-    def forget(self, committed: int) -> None:
-        """Drop what was cached about the nodes from ``committed`` on (an iteration rolled back)."""
-        for index in [index for index in self._geometry if index >= committed]:
-            del self._geometry[index]
-        for pair in [pair for pair in self._ratios if pair[0] >= committed]:
-            del self._ratios[pair]
-        self._plan_rooms.clear()
-        if self.r1 is not None:
-            self.r1.forget(committed)
-
-
-class Room(Protocol):
-    """What the selections weigh besides their own rules: the R1 room or the learned feasibility."""
-
-    def node_weights(
-        self, search: SearchView, indices: list[int], next_state: PData, move: Any
-    ) -> list[float] | None: ...
-
-    def plan_rooms(self, search: SearchView, s: str) -> list[float]: ...
-
-    def forget(self, committed: int) -> None: ...
 
 
 # --- SelectTopologicalState ----------------------------------------------------------------------------
@@ -255,7 +159,7 @@ class UniformStates:
 class CrossingStates:
     """crs: weight ``1 + Cross(s)``; with an :class:`R1Room`, times the room of the best plan of ``s``."""
 
-    def __init__(self, room: Room | None = None) -> None:
+    def __init__(self, room: R1Room | None = None) -> None:
         self.room = room
 
     def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
@@ -302,7 +206,7 @@ class UniformPlans:
     """rnd, crs: every plan alike; with an :class:`R1Room`, a plan that starts with a curl weighs the
     room of the best node of ``s`` for it."""
 
-    def __init__(self, room: Room | None = None) -> None:
+    def __init__(self, room: R1Room | None = None) -> None:
         self.room = room
 
     def select(self, search: SearchView, s: str, rng: np.random.Generator) -> int:
@@ -352,7 +256,7 @@ class RetryWeightedNodes:
     replays the paper's choice.
     """
 
-    def __init__(self, retry_weight: float, room: Room | None = None) -> None:
+    def __init__(self, retry_weight: float, room: R1Room | None = None) -> None:
         if not 0.0 < retry_weight <= 1.0:
             raise ValueError(f"retry_weight must lie in (0, 1], got {retry_weight}")
         self.retry_weight = retry_weight
@@ -364,10 +268,11 @@ class RetryWeightedNodes:
         indices = search.tree.by_state[s]
         pairs, key = search.stats["pair"], next_state.key
         weights = [self.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
-        if self.room is not None and move is not None and not move.remove:
-            extra = self.room.node_weights(search, indices, next_state, move)
-            if extra is not None:
-                weights = [w * e for w, e in zip(weights, extra, strict=True)]
+        if self.room is not None and move is not None and move.kind == "R1" and not move.remove:
+            nodes, room = search.tree.nodes, self.room
+            weights = [
+                w * room.node_weight(nodes[i], move.segment) for w, i in zip(weights, indices, strict=True)
+            ]
         return search.tree.nodes[indices[_draw(weights, rng)]]
 
 
@@ -526,7 +431,7 @@ class Parts:
     step_curves: StepCurves
     expand_curves: BlindCurves  # RandomExpand's curves (and the low-level-only baseline's)
     goal_test: GoalTest
-    room: Room | None = None  # the cache the selections share, forgotten on rollback
+    room: R1Room | None = None  # the cache the selections share, forgotten on rollback
 
     def forget(self, committed: int) -> None:
         """An unfinished iteration was rolled back to ``committed`` nodes: drop what it cached."""
@@ -539,12 +444,9 @@ def default_parts(
     goal: Goal,
     sampler: CurveSampler | None = None,
     goal_test: GoalTest | None = None,
-    feasibility: Any | None = None,
 ) -> Parts:
     """The parts ``options`` name: heuristic -> state and plan selection, ``retry_weight`` and ``r1_room``
-    -> node selection (and the room the crs and plan choices weigh; with ``feasibility`` > 0 and planner
-    twisted, the learned odds of ``feasibility``, default the shipped model, instead of the R1 room),
-    ``cross_move`` -> the scripted share
+    -> node selection (and the room the crs and plan choices weigh), ``cross_move`` -> the scripted share
     of a Cross step (planner twisted); ``sampler`` (None: random curves) proposes the other curves.
     ``goal_test`` defaults to :class:`StateMatch`; with ``options.tighten`` it must be given (a
     :class:`PullTest`, as :mod:`twisted.planner.session` makes it)."""
@@ -552,14 +454,7 @@ def default_parts(
         if options.tighten:
             raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
         goal_test = StateMatch(goal)
-    r1_room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
-    room: Room | None = r1_room
-    if options.feasibility > 0.0 and options.planner == "twisted":
-        if feasibility is None:
-            from twisted.model.feasibility import load_default_feasibility
-
-            feasibility = load_default_feasibility()
-        room = FeasibilityRoom(feasibility, options.feasibility, r1_room)
+    room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
     states: StateSelection
     plans: PlanSelection
     if options.heuristic == "ucb":
