@@ -1,11 +1,14 @@
 """Benchmark of the high level: enumeration counts and time, BFS plan queries cold and cached.
 
-    python bench/bench_moves.py [--goals 20] [--seed 0] [--limit 100] [--five]
+    python bench/bench_moves.py [--goals 20] [--seed 0] [--limit 100] [--five] [--knot granny]
 
 Prints the number of states reached from the empty rope per crossing count next to the reference's
 (4 / 40 / 528 / 7,968), the time to enumerate up to 4 crossings (caches cleared), and the time of a plan
 query from the empty rope to random 3- and 4-crossing goals: the BFS alone with cold caches, through
-the plan cache in a new temporary SQLite store (miss: BFS + write), and again (hit: read).
+the plan cache in a new temporary SQLite store (miss: BFS + write), and again (hit: read). With
+``--knot NAME``, also the BFS toward every state of that knot (a knot goal, as ``plan --knot`` asks)
+from random states a search toward it can reach, with the move caches warm as in a search: the first
+query (which builds the goals' sub-state union) and the later ones.
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from twisted.diagram import diagram
-from twisted.moves import _successors, enumerate_states, plans
+from twisted.knots.states import states_tying
+from twisted.moves import _allowed_states, _successors, enumerate_states, plans, plans_to_any, sub_states
 from twisted.store import open_store
 from twisted.store.plans import cached_plans
-from twisted.topology import EMPTY
+from twisted.topology import EMPTY, PData, PDataError
 
 REFERENCE = {1: 4, 2: 40, 3: 528, 4: 7968}
 
@@ -30,6 +34,7 @@ REFERENCE = {1: 4, 2: 40, 3: 528, 4: 7968}
 def clear_caches() -> None:
     _successors.cache_clear()
     diagram.cache_clear()
+    _allowed_states.cache_clear()
 
 
 def ms(values: list[float]) -> str:
@@ -44,6 +49,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--limit", type=int, default=100, help="plan limit of each query")
     parser.add_argument("--five", action="store_true", help="also enumerate up to 5 crossings")
+    parser.add_argument("--knot", help="also time plan queries toward this knot's states (e.g. granny)")
     args = parser.parse_args()
 
     clear_caches()
@@ -93,6 +99,37 @@ def main() -> None:
             print(f"  cached_plans, miss:       {ms(miss)}")
             print(f"  cached_plans, hit:        {ms(hit)}")
         store.close()
+    if args.knot:
+        knot_queries(args.knot, args.goals, args.limit, rng)
+
+
+def _drawable(p: PData) -> bool:
+    try:
+        diagram(p)
+    except PDataError:
+        return False  # a sub-state of a goal need not be a diagram a rope can have
+    return True
+
+
+def knot_queries(name: str, n: int, limit: int, rng: np.random.Generator) -> None:
+    """Time ``plans_to_any`` toward every state of knot ``name`` from ``n`` random states on the way."""
+    goals = states_tying(name)
+    on_the_way = sorted({p for g in goals for p in sub_states(g) if 0 < p.cross < g.cross and _drawable(p)},
+                        key=lambda p: p.key)
+    starts = [on_the_way[int(i)] for i in rng.choice(len(on_the_way), size=min(n, len(on_the_way)), replace=False)]
+    clear_caches()
+    for p in starts:  # the move caches warm, as in a search that has expanded these states before
+        plans_to_any(p, goals, limit)
+    _allowed_states.cache_clear()
+    times = []
+    for p in starts:
+        t0 = time.perf_counter()
+        plans_to_any(p, goals, limit)
+        times.append(time.perf_counter() - t0)
+    print(f"plan queries toward {name} ({len(goals)} states of {goals[0].cross} crossings) from {len(starts)} "
+          f"random states on the way (limit {limit}, move caches warm):")
+    print(f"  first query:              {times[0] * 1e3:7.2f} ms")
+    print(f"  later queries:            {ms(times[1:])}")
 
 
 if __name__ == "__main__":
