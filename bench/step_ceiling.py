@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from sqlalchemy import select
+from step_moves import move_class  # the classes bench/step_moves.py names (bench/ is this script's folder)
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -41,16 +42,6 @@ from twisted.store.search import load_run
 from twisted.topology import parse_p_data
 
 WITHIN = (1, 2, 5)
-
-
-def move_class(move: Any, cross: int) -> str:
-    """The class of ``move`` from a state of ``cross`` crossings, as bench/step_moves.py names it."""
-    ends = (0, 2 * cross)
-    if move.kind == "Cross":
-        return f"Cross tip over {'other end' if move.other_segment in ends else 'inner'} segment"
-    if move.kind == "R1":
-        return f"R1 on {'end' if move.segment in ends else 'inner'} segment"
-    return "R2"
 
 
 def stored_pairs(db: str, sets: list[str], labels: list[str], cross: int) -> list[dict[str, Any]]:
@@ -220,7 +211,7 @@ def main() -> None:
         lambda: {"pairs": 0, "tried": [], "first": [], "counts": [0, 0, 0, 0]}
     )
     for i, pair in enumerate(chosen):
-        row = rows[(pair["group"], move_class(pair["move"], cross))]
+        row = rows[(pair["group"], move_class(pair["move"], pair["node"].p_data))]
         row["pairs"] += 1
         row["tried"].append(pair["tried"])
         row["first"].append(first[i])
