@@ -142,6 +142,15 @@ class PlannerOptions:
         before=0.0,
         before_in_evals=True,
     )
+    penultimate_curves: int = option(
+        0,
+        "After a plan step reaches the state before the plan's last, this many more curves for that "
+        "step, so that the last step can start from more configurations (0: off).",
+        bounds=(0, 1000),
+        commands=EVALUATED,
+        before=0,
+        before_in_evals=True,
+    )
     tighten: bool = option(
         False,
         "Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a little, "
