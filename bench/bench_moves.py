@@ -114,9 +114,13 @@ def _drawable(p: PData) -> bool:
 def knot_queries(name: str, n: int, limit: int, rng: np.random.Generator) -> None:
     """Time ``plans_to_any`` toward every state of knot ``name`` from ``n`` random states on the way."""
     goals = states_tying(name)
-    on_the_way = sorted({p for g in goals for p in sub_states(g) if 0 < p.cross < g.cross and _drawable(p)},
-                        key=lambda p: p.key)
-    starts = [on_the_way[int(i)] for i in rng.choice(len(on_the_way), size=min(n, len(on_the_way)), replace=False)]
+    on_the_way = sorted(
+        {p for g in goals for p in sub_states(g) if 0 < p.cross < g.cross and _drawable(p)},
+        key=lambda p: p.key,
+    )
+    starts = [
+        on_the_way[int(i)] for i in rng.choice(len(on_the_way), size=min(n, len(on_the_way)), replace=False)
+    ]
     clear_caches()
     for p in starts:  # the move caches warm, as in a search that has expanded these states before
         plans_to_any(p, goals, limit)
@@ -126,8 +130,10 @@ def knot_queries(name: str, n: int, limit: int, rng: np.random.Generator) -> Non
         t0 = time.perf_counter()
         plans_to_any(p, goals, limit)
         times.append(time.perf_counter() - t0)
-    print(f"plan queries toward {name} ({len(goals)} states of {goals[0].cross} crossings) from {len(starts)} "
-          f"random states on the way (limit {limit}, move caches warm):")
+    print(
+        f"plan queries toward {name} ({len(goals)} states of {goals[0].cross} crossings) from {len(starts)} "
+        f"random states on the way (limit {limit}, move caches warm):"
+    )
     print(f"  first query:              {times[0] * 1e3:7.2f} ms")
     print(f"  later queries:            {ms(times[1:])}")
 
