@@ -209,29 +209,6 @@ def test_follow_plan_counts_each_node_and_next_state_it_asks_for(tmp_path: Path)
     assert all(key.split("|")[1] == parse_p_data(ONE_CROSSING).key for key in pairs)
 
 
-@pytest.mark.parametrize("extra", [0, 4])
-def test_a_step_that_reaches_the_state_before_the_last_draws_the_penultimate_curves_more(
-    tmp_path: Path, extra: int
-) -> None:
-    """--penultimate-curves N: each step that reaches a plan's state before its last simulates N more
-    curves of that step from the same node (kept like any result); no other step does."""
-    two = '[[1,"O",4,"+"],[2,"O",3,"+"],[3,"U",2,"+"],[4,"U",1,"+"]]'  # 0 -> 1 -> 2 crossings by curls
-    options = PlannerOptions(planner="random-low", seed=0, p_expand=0.0, penultimate_curves=extra)
-    with open_store(_db(tmp_path)) as store, SimPool(1, 1.0) as pool:
-        search = start_search(store, check_goal(two), options, pool)
-        result = search.run(max_iterations=25)
-    last = parse_p_data(two)
-    penultimate_hits = sum(
-        reached
-        for key, (_, reached) in result.stats["pair"].items()
-        if parse_p_data(key.split("|")[1]) != last  # a step toward a 1-crossing state: the first of two
-    )
-    steps = sum(tried for tried, _ in result.steps_by_move().values())
-    assert penultimate_hits > 0 or extra == 0
-    calls, _ = result.stats["calls"]["follow_plan"]
-    assert calls == options.k * steps + extra * penultimate_hits
-
-
 def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() -> None:
     stored = PlannerOptions(seed=3).to_dict()
     del stored["retry_weight"]

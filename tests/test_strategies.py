@@ -364,13 +364,7 @@ def test_every_option_is_declared_once_and_its_forms_come_from_the_declaration()
     assert list(declared) == list(PlannerOptions.__dataclass_fields__)
     defaults = PlannerOptions()
     assert defaults.to_dict() == {name: spec.default for name, spec in declared.items()}
-    before = {
-        "retry_weight": 1.0,
-        "cross_move": 0.0,
-        "r1_room": 0.0,
-        "penultimate_curves": 0,
-        "tighten": False,
-    }
+    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "tighten": False}
     assert OPTIONS_BEFORE == before
     assert set(result_options()) == {n for n, s in declared.items() if "eval" in s.commands}
     assert "seed" not in result_options() and "k" in result_options()
@@ -403,8 +397,9 @@ def test_stored_options_fill_what_did_not_exist_and_refuse_a_removed_option() ->
     assert removed_in({"state_prior": 50.0}) and not removed_in({"state_prior": 0.0}) and not removed_in({})
     with pytest.raises(ValueError, match=r"state_prior 50.0 \(--state-prior was removed"):
         PlannerOptions.from_dict({**stored, "state_prior": 50.0})
-    assert set(REMOVED_OPTIONS) == {"state_prior", "feasibility"}
+    assert set(REMOVED_OPTIONS) == {"state_prior", "feasibility", "penultimate_curves"}
     assert removed_in({"feasibility": 1.0}) and not removed_in({"feasibility": 0.0})
+    assert removed_in({"penultimate_curves": 6}) and not removed_in({"penultimate_curves": 0})
     with pytest.raises(TypeError):
         PlannerOptions(state_prior=20.0)  # type: ignore[call-arg]
     assert planner_options({"k": None, "seed": 4}) == PlannerOptions(seed=4)

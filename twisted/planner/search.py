@@ -394,13 +394,6 @@ class Twisted:
                 return len(plan.moves)
             if hit is None:
                 return step
-            if self.options.penultimate_curves and step == len(plan.moves) - 2:
-                extra, _ = self.parts.step_curves.propose(
-                    current, next_state, move, self.options.penultimate_curves, self.rng
-                )
-                self.simulate(current, extra, "follow_plan")
-                if self.goal_node is not None:
-                    return len(plan.moves)
             current = hit
         return len(plan.moves)
 
