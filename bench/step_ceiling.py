@@ -2,6 +2,8 @@
 
     python bench/step_ceiling.py --db sqlite:///tune.db --set tune-u5 --label cur --from 4 \
         [--pairs 20] [--steps 20] [--workers 2] [--seed 0] [--model-id N] [--json out.json]
+    python bench/step_ceiling.py --db ... --set ... --label ... --from 4 --pairs 100 --save-pairs p.npz
+    python bench/step_ceiling.py --pairs-file p.npz --steps 40 --workers 16     # on another machine
 
 A search asks a node of its tree for the next state of a plan and draws K = 3 curves for it (a step,
 DESIGN 8); its ``pair`` statistics keep, per (node, requested next state), the steps tried and those
