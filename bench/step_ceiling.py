@@ -28,8 +28,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
-from step_moves import move_class  # the classes bench/step_moves.py names (bench/ is this script's folder)
+from step_moves import move_class, stored_pairs  # bench/ is this script's folder
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -39,55 +38,20 @@ from twisted.planner.strategies import StepCurves
 from twisted.planner.tree import Node
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
-from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
-from twisted.store.search import load_run
 from twisted.topology import parse_p_data
 
 WITHIN = (1, 2, 5)
 
 
-def stored_pairs(db: str, sets: list[str], labels: list[str], cross: int) -> list[dict[str, Any]]:
-    """Every (node, next state) pair the runs tried from states of ``cross`` crossings, with its node."""
-    out: list[dict[str, Any]] = []
+def pairs_from(db: str, sets: list[str], labels: list[str], cross: int) -> list[dict[str, Any]]:
+    """Every (node, next state) pair the runs tried from states of ``cross`` crossings that one move
+    explains, with its node."""
     with open_store(db) as store:
-        with store.session() as session:
-            q = (
-                select(EvalResult.plan_run_id)
-                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
-                .where(
-                    EvalResult.status.in_(FINISHED_STATUSES),
-                    EvalResult.plan_run_id.is_not(None),
-                    ProblemSet.name.in_(sets),
-                    EvalResult.planner.in_(labels),
-                )
-                .order_by(EvalResult.plan_run_id)
-            )
-            run_ids = [int(r) for r in session.scalars(q) if r is not None]
-        for run_id in run_ids:
-            info = load_run(store, run_id)
-            if info is None or info.checkpoint is None:
-                continue
-            nodes = {n.seq: n for n in info.nodes}
-            for key, (tried, reached) in info.checkpoint.stats.get("pair", {}).items():
-                seq_text, next_key = key.split("|", 1)
-                node = nodes.get(int(seq_text))
-                if node is None or node.p_data.cross != cross:
-                    continue
-                nxt = parse_p_data(next_key)
-                move = explains(node.p_data, nxt)
-                if move is None:
-                    continue
-                out.append(
-                    {
-                        "run": run_id,
-                        "node": node,
-                        "next": nxt,
-                        "move": move,
-                        "tried": tried,
-                        "reached": reached,
-                    }
-                )
-    return out
+        return [
+            {"run": run_id, "node": node, "next": nxt, "move": move, "tried": tried, "reached": reached}
+            for run_id, _, node, nxt, move, tried, reached in stored_pairs(store, sets, labels)
+            if node.p_data.cross == cross and move is not None
+        ]
 
 
 def choose(pairs: list[dict[str, Any]], n: int, rng: np.random.Generator) -> list[dict[str, Any]]:
@@ -171,7 +135,7 @@ def main() -> None:
         print(f"{len(chosen)} pairs from {cross} crossings read from {args.pairs_file}")
     else:
         cross = args.cross
-        pairs = stored_pairs(args.db, args.sets, args.labels, cross)
+        pairs = pairs_from(args.db, args.sets, args.labels, cross)
         chosen = choose(pairs, args.pairs, rng)
         print(
             f"{len(pairs)} pairs tried from {cross} crossings in {', '.join(args.sets)} "

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections import defaultdict
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 from sqlalchemy import select
@@ -25,7 +26,7 @@ from sqlalchemy import select
 from twisted.moves import Move, explains
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
-from twisted.store.search import load_run
+from twisted.store.search import StoredNode, load_run
 from twisted.topology import PData, parse_p_data
 
 
@@ -37,6 +38,37 @@ def move_class(move: Move, p_data: PData) -> str:
     if move.kind == "R1":
         return f"R1 on {'end' if move.segment in ends else 'inner'} segment"
     return "R2"
+
+
+def stored_pairs(
+    store: Any, sets: Sequence[str] | None, labels: Sequence[str] | None
+) -> Iterator[tuple[int, str, StoredNode, PData, Move | None, float, float]]:
+    """Every (node, requested next state) pair of the finished evaluation runs toward ``sets`` under
+    ``labels`` (all when None or empty), from the runs' ``pair`` statistics: run id, goal key, the node,
+    the next state, the move that explains the step (None when no one move does), steps tried and
+    reached. Runs made before the pair statistics were kept are skipped."""
+    with store.session() as session:
+        q = (
+            select(EvalResult.plan_run_id, EvalResult.goal_key)
+            .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
+            .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
+            .order_by(EvalResult.plan_run_id)
+        )
+        if sets:
+            q = q.where(ProblemSet.name.in_(sets))
+        if labels:
+            q = q.where(EvalResult.planner.in_(labels))
+        rows = session.execute(q).all()
+    for run_id, goal_key in rows:
+        info = load_run(store, run_id)
+        if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
+            continue  # a run made before the pair statistics were kept
+        nodes = {node.seq: node for node in info.nodes}
+        for key, (tried, reached) in info.checkpoint.stats["pair"].items():
+            seq, next_key = key.split("|", 1)
+            node = nodes[int(seq)]
+            next_state = parse_p_data(json.loads(next_key))
+            yield run_id, goal_key, node, next_state, explains(node.p_data, next_state), tried, reached
 
 
 def main() -> None:
@@ -53,38 +85,19 @@ def main() -> None:
         lambda: {"steps": 0.0, "reached": 0.0, "pairs": 0, "goals": set(), "runs": set()}
     )
     with open_store(args.db) as store:
-        with store.session() as session:
-            q = (
-                select(EvalResult.plan_run_id, EvalResult.goal_key)
-                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
-                .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
-            )
-            if args.sets:
-                q = q.where(ProblemSet.name.in_(args.sets))
-            if args.labels:
-                q = q.where(EvalResult.planner.in_(args.labels))
-            rows = session.execute(q).all()
-        for run_id, goal_key in rows:
-            info = load_run(store, run_id)
-            if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
-                continue  # a run made before the pair statistics were kept
-            nodes = {node.seq: node for node in info.nodes}
-            for key, (tried, reached) in info.checkpoint.stats["pair"].items():
-                seq, next_key = key.split("|", 1)
-                node = nodes[int(seq)]
-                level = node.p_data.cross
-                if args.level and level not in args.level:
-                    continue
-                move = explains(node.p_data, parse_p_data(json.loads(next_key)))
-                if move is None:
-                    continue
-                name = str(move) if args.detail else move_class(move, node.p_data)
-                g = groups[(level, name)]
-                g["steps"] += tried
-                g["reached"] += reached
-                g["pairs"] += 1
-                g["goals"].add(goal_key)
-                g["runs"].add(run_id)
+        for run_id, goal_key, node, _, move, tried, reached in stored_pairs(store, args.sets, args.labels):
+            level = node.p_data.cross
+            if args.level and level not in args.level:
+                continue
+            if move is None:
+                continue
+            name = str(move) if args.detail else move_class(move, node.p_data)
+            g = groups[(level, name)]
+            g["steps"] += tried
+            g["reached"] += reached
+            g["pairs"] += 1
+            g["goals"].add(goal_key)
+            g["runs"].add(run_id)
 
     print(f"{'from':>4} {'move':60} {'steps':>7} {'reached':>8} {'rate':>6}", end="")
     print(f" {'pairs':>6} {'goals':>5} {'runs':>5}")
