@@ -500,9 +500,9 @@ def sub_states(goal: PData) -> frozenset[PData]:
 
 
 @lru_cache(maxsize=64)
-def _allowed_states(goals: tuple[PData, ...]) -> frozenset[PData]:
+def _allowed_states(goals: frozenset[PData]) -> frozenset[PData]:
     """The union of the goals' :func:`sub_states`: the states a plan toward them may pass. Kept per goal
-    tuple, since a search asks for plans from every state it reaches toward the same goals (a knot
+    set, since a search asks for plans from every state it reaches toward the same goals (a knot
     goal's 48 states of 6 crossings make 3,072 sub-state computations a query otherwise)."""
     return frozenset().union(*(sub_states(goal) for goal in goals))
 
@@ -539,7 +539,7 @@ def plans_to_any(start: PData, goals: Iterable[PData], limit: int = DEFAULT_PLAN
     targets = _goal_set(start, goals, limit)
     if start in targets:
         return [Plan([start], [])]
-    reachable = tuple(sorted((goal for goal in targets if goal.cross > start.cross), key=lambda p: p.key))
+    reachable = frozenset(goal for goal in targets if goal.cross > start.cross)
     allowed = _allowed_states(reachable)
     if start not in allowed:
         return []
