@@ -37,7 +37,19 @@ from cli.options import json_option, print_json, with_planner_options
 
 
 def _curve_row(curve: Any) -> dict[str, Any]:
-    return {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
+    """A step of a low-level plan: its action, and the curve's parameters (None for a cinch)."""
+    action = getattr(curve, "action", "curve")
+    if action != "curve":
+        return {"action": action, "link": None, "z_max_m": None, "x_m": None, "y_m": None}
+    return {"action": action, "link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m,
+            "y_m": curve.y_m}
+
+
+def _curve_cells(row: dict[str, Any]) -> list[str]:
+    """The link, z_max_m, x_m and y_m cells of a plan step's table row (a cinch: "cinch", then blank)."""
+    if row["action"] != "curve":
+        return [str(row["action"]), "", "", ""]
+    return [str(row["link"]), f"{row['z_max_m']:.4f}", f"{row['x_m']:+.4f}", f"{row['y_m']:+.4f}"]
 
 
 @app.command("plan")
@@ -517,12 +529,7 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
             table.add_column(name, justify="right" if name != "state after" else "left")
         for row in steps:
             table.add_row(
-                str(row["step"]),
-                str(row["link"]),
-                f"{row['z_max_m']:.4f}",
-                f"{row['x_m']:+.4f}",
-                f"{row['y_m']:+.4f}",
-                json.dumps(row["state"], separators=(",", ":")),
+                str(row["step"]), *_curve_cells(row), json.dumps(row["state"], separators=(",", ":"))
             )
         console.print(table)
 
@@ -597,7 +604,7 @@ def replay_command(
         for i, step in enumerate(result.steps, start=1):
             replayed = step.replayed.key if step.replayed is not None else f"rejected: {step.reason}"
             same = "yes" if step.matches else "NO"
-            table.add_row(str(i), str(step.curve.link), step.recorded.key, replayed, same)
+            table.add_row(str(i), _curve_cells(_curve_row(step.curve))[0], step.recorded.key, replayed, same)
         console.print(table)
         verdict = (
             "[bold green]reaches the goal[/]"

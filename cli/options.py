@@ -141,6 +141,10 @@ def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
     False), its bounds checked (NaN included; click's ranges let NaN through), its choices offered."""
     shown = f"{spec.default:g}" if isinstance(spec.default, float) else str(spec.default)
     help = spec.help if spec.type is bool else spec.help.rstrip(".") + f" (default {shown})."
+    if spec.type is bool and spec.default:  # on unless --no-NAME: a pair of flags, None when neither
+        pair = typer.Option(None, f"{spec.flag}/--no-{spec.flag[2:]}", help=help)
+        kind = inspect.Parameter.KEYWORD_ONLY
+        return inspect.Parameter(spec.name, kind, default=pair, annotation=bool | None)
     if spec.type is bool:
         flag = typer.Option(False, spec.flag, help=help)
         return inspect.Parameter(spec.name, inspect.Parameter.KEYWORD_ONLY, default=flag, annotation=bool)
@@ -158,9 +162,10 @@ def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
     )
 
 
-def _plain(given: Any) -> Any:
-    """A planner option as the planner takes it: a choice's string; None for a flag not given."""
-    if given is False:
+def _plain(spec: OptionSpec, given: Any) -> Any:
+    """A planner option as the planner takes it: a choice's string; None for a flag not given (an
+    option that is off by default and was not turned on)."""
+    if given is False and not spec.default:
         return None
     return given.value if isinstance(given, Enum) else given
 
@@ -179,8 +184,7 @@ def with_planner_options(command: str) -> Callable[[F], F]:
 
         @functools.wraps(func)
         def command_function(*args: Any, **kwargs: Any) -> Any:
-            given = {spec.name: kwargs.pop(spec.name) for spec in chosen}
-            search_options = {name: _plain(v) for name, v in given.items()}
+            search_options = {spec.name: _plain(spec, kwargs.pop(spec.name)) for spec in chosen}
             return func(*args, search_options=search_options, **kwargs)
 
         parameters = kept + added

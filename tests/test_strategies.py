@@ -364,7 +364,7 @@ def test_every_option_is_declared_once_and_its_forms_come_from_the_declaration()
     assert list(declared) == list(PlannerOptions.__dataclass_fields__)
     defaults = PlannerOptions()
     assert defaults.to_dict() == {name: spec.default for name, spec in declared.items()}
-    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "tighten": False}
+    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "cinch": False, "tighten": False}
     assert OPTIONS_BEFORE == before
     assert set(result_options()) == {n for n, s in declared.items() if "eval" in s.commands}
     assert "seed" not in result_options() and "k" in result_options()
@@ -393,7 +393,7 @@ def test_stored_options_fill_what_did_not_exist_and_refuse_a_removed_option() ->
     for name in OPTIONS_BEFORE:
         del stored[name]
     old = PlannerOptions.from_dict({**stored, "model_id": 2, "state_prior": 0.0})  # 0: the planner now
-    assert (old.retry_weight, old.cross_move, old.r1_room) == (1.0, 0.0, 0.0)
+    assert (old.retry_weight, old.cross_move, old.r1_room, old.cinch) == (1.0, 0.0, 0.0, False)
     assert removed_in({"state_prior": 50.0}) and not removed_in({"state_prior": 0.0}) and not removed_in({})
     with pytest.raises(ValueError, match=r"state_prior 50.0 \(--state-prior was removed"):
         PlannerOptions.from_dict({**stored, "state_prior": 50.0})
@@ -427,3 +427,58 @@ def test_a_fixed_seed_search_is_the_one_recorded_before_the_planner_was_split_in
         recorded["sim_calls"],
         recorded["nodes"],
     )
+
+
+# --- cinching the first overhand of a granny or a square -----------------------------------------------
+
+
+def test_only_a_composite_knot_goal_cinches_and_only_ropes_tying_a_summand_at_its_crossing_number() -> None:
+    from twisted.planner.strategies import SummandCinch
+
+    granny, overhand = knot_goal("granny"), knot_goal("overhand")
+    assert default_parts(PlannerOptions(), granny).cinch is not None
+    assert default_parts(PlannerOptions(cinch=False), granny).cinch is None
+    assert default_parts(PlannerOptions(), overhand).cinch is None  # a prime knot has no summand
+    assert default_parts(PlannerOptions(), state_goal(granny.states[0])).cinch is None  # one diagram asked
+    part = SummandCinch(granny)
+    assert part.summands == {"3_1+", "3_1-"}
+    trefoil = overhand.states[0]
+    assert part.ties_summand(trefoil) and not part.ties_summand(EMPTY)
+    curled = [s.state for s in successors(trefoil) if s.move.kind == "R1"][0]  # a trefoil and a curl
+    assert curled.cross == 4 and not part.ties_summand(curled)  # the pull would take the curl out
+    assert not part.ties_summand(granny.states[0])
+
+
+def test_steps_start_from_tight_ropes_and_a_summand_state_cinches_again_after_its_steps() -> None:
+    from twisted.planner.strategies import CINCH_STEPS, TIGHT_WEIGHT, SummandCinch
+    from twisted.planner.tree import CINCH
+
+    granny = knot_goal("granny")
+    trefoil = knot_goal("overhand").states[0]
+    q, points, _ = straight_rope()
+    tree = SearchTree()
+    tree.add(Node(0, None, q, points, trefoil, None, 0, 0))  # loose, cinched into node 2
+    tree.add(Node(1, None, q, points, trefoil, None, 0, 0))  # loose, never cinched
+    tree.add(Node(2, 0, q, points, trefoil, CINCH, 1, 1))  # the cinch of node 0
+    part = SummandCinch(granny)
+    part.restore(tree)
+    assert part.tried == {0: 2}
+    s = trefoil.key
+    view = SimpleNamespace(tree=tree, plans={}, stats={"step": {}}, goal=granny)
+    assert part.candidates(view, s, [0, 1, 2]) == [2]
+    assert not part.wants(tree, tree.nodes[0]) and not part.wants(tree, tree.nodes[2])
+    assert part.wants(tree, tree.nodes[1])
+    view.stats["step"][s] = [float(CINCH_STEPS), 0.0]  # its one cinched node has had its steps
+    assert part.candidates(view, s, [0, 1, 2]) == [2, 1]  # never node 0: it was cinched
+    # elsewhere, a state's steps start from its tight nodes (made from a cinched one) when it has any,
+    # and such a state weighs TIGHT_WEIGHT times in the crs choice
+    tree.add(Node(3, None, q, points, EMPTY, None, 0, 0))
+    assert part.candidates(view, EMPTY.key, [3]) == [3] and part.state_weight(view, EMPTY.key) == 1.0
+    tree.add(Node(4, 2, q, points, EMPTY, None, 2, 2))
+    assert part.candidates(view, EMPTY.key, [3, 4]) == [4]
+    assert part.state_weight(view, EMPTY.key) == TIGHT_WEIGHT and part.state_weight(view, s) == TIGHT_WEIGHT
+    assert not part.wants(tree, tree.nodes[4])
+    tree.truncate(2)  # the iteration that made node 2 (and so 3 and 4) was rolled back
+    part.forget(2)
+    assert part.tried == {} and part.state_weight(view, s) == 1.0
+    assert part.candidates(view, s, [0, 1]) == [0, 1] and part.wants(tree, tree.nodes[0])

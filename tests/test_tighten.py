@@ -8,6 +8,7 @@ the shipped model, one worker) on a tmp store, then ``twisted replay --tighten``
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -209,3 +210,115 @@ def test_a_knotoid_goal_names_no_knot_and_replay_tighten_exits_3(tmp_path: Path)
     assert row.ties_goal is False and row.goal_knot is None
     code, out = _cli(db, "replay", run_id, "--tighten")
     assert code == 3 and "does not tie" in " ".join(out.split())
+
+
+def _final_configuration(db: str, run_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """The q and the link points of a solved run's goal node."""
+    from sqlalchemy import select
+
+    from twisted.store.models import blob_to_array
+    from twisted.store.search import SearchNode, SearchRunRow
+
+    with open_store(db) as store, store.session() as session:
+        query = select(SearchRunRow.goal_node_id).where(SearchRunRow.run_id == run_id)
+        goal_node = session.scalars(query).one()
+        node = session.get_one(SearchNode, goal_node)
+        return blob_to_array(node.q), blob_to_array(node.points, (-1, 3))
+
+
+def test_a_cinched_overhand_is_the_same_trefoil_in_fewer_links_with_its_ends_free(
+    overhand_run: tuple[str, dict],
+) -> None:
+    from twisted.tighten import cinch
+
+    db, result = overhand_run
+    q, points = _final_configuration(db, result["run_id"])
+    before = identify(top(points))
+    sim = tightening_sim()
+    done = cinch(sim, q)
+    assert done.ok and done.reason is None and done.state is not None and done.points is not None
+    assert done.p_data == top(done.points) and identify(done.p_data).name == before.name
+    # let go and settled: on the table, at rest, no end held
+    assert not sim.data.eq_active.any()
+    assert float(done.points[:, 2].max()) < 0.05
+    # the knot holds less rope than before: the ends lie further apart
+    apart = lambda pts: float(np.linalg.norm(pts[-1, :2] - pts[0, :2]))  # noqa: E731
+    assert apart(done.points) > apart(points) + 0.05
+    assert done.sim_seconds > 0
+    # deterministic, as every simulation here
+    again = cinch(tightening_sim(), q)
+    assert again.state is not None and np.array_equal(again.state, done.state)
+
+
+def test_a_search_for_a_granny_cinches_the_overhand_it_starts_from_and_stores_the_cinch(
+    overhand_run: tuple[str, dict], tmp_path: Path
+) -> None:
+    """Real simulation: a granny search started from the overhand of the fixture cinches that rope
+    before its first plan step, keeps the cinched rope as a node (action "cinch", no curve) and starts
+    its steps from it; resumed, it knows the cinch and does not pull the rope again. --no-cinch does not
+    cinch."""
+    from sqlalchemy import select
+
+    from twisted.store.queries import add_configuration
+    from twisted.store.search import SearchNode
+
+    source_db, result = overhand_run
+    q, points = _final_configuration(source_db, result["run_id"])
+    db = f"sqlite:///{tmp_path / 'granny.db'}"
+    with open_store(db) as store, store.session(write=True) as session:
+        config_id = add_configuration(session, run_id=None, p_data=top(points), q=q, points=points).id
+    args = ["plan", "--knot", "granny", "--start-config", str(config_id), "--workers", "1", "--seed", "0"]
+    code, out = _cli(db, *args, "--max-iterations", "2", "--timeout", "3600", "--json")
+    assert code == 3, out  # exit 3: not solved (the iteration cap)
+    first = _json(out)
+    assert first["sim_calls_by_source"]["cinch"] == 1
+    with open_store(db) as store, store.session() as session:
+        rows = session.execute(
+            select(
+                SearchNode.seq,
+                SearchNode.id.label("node_id"),
+                SearchNode.parent_id,
+                SearchNode.action,
+                SearchNode.link,
+                SearchNode.cross,
+                SearchNode.state_id,
+            )
+            .where(SearchNode.run_id == first["run_id"])
+            .order_by(SearchNode.seq)
+        ).all()
+        stats = json.loads(json.dumps(_checkpoint_stats(session, first["run_id"])))
+    assert rows[0].action == "curve" and rows[0].parent_id is None  # the root
+    [cinched] = [r for r in rows if r.action == "cinch"]
+    assert cinched.seq == 1 and cinched.link is None and cinched.cross == 3
+    # every plan step but the first starts from a tight rope (the cinched one or one made from it); the
+    # first starts from the loose root only where the cinch drew the trefoil otherwise (this fixture's
+    # overhand: the root's state then had no other node)
+    seq_of = {r.node_id: r.seq for r in rows}
+    parent = {r.seq: seq_of.get(r.parent_id) for r in rows}
+
+    def tight(seq: int | None) -> bool:
+        return seq is not None and (rows[seq].action == "cinch" or tight(parent[seq]))
+
+    tries = Counter()
+    for key, (tried, _) in stats["pair"].items():
+        tries[int(key.split("|")[0])] += tried
+    assert tries and all(tight(seq) for seq in tries if seq != 0)
+    assert tries[0] <= (0 if cinched.state_id == rows[0].state_id else 1)
+
+    resume = ["plan", str(first["run_id"]), "--resume", "--workers", "1", "--max-iterations", "4"]
+    code, out = _cli(db, *resume, "--timeout", "3600", "--json")
+    assert code == 3, out  # exit 3: not solved (the iteration cap)
+    assert _json(out)["sim_calls_by_source"]["cinch"] == 1  # counted once: the resumed run did not pull again
+
+    code, out = _cli(db, *args, "--no-cinch", "--max-iterations", "2", "--timeout", "3600", "--json")
+    assert code == 3, out  # exit 3: not solved (the iteration cap)
+    assert "cinch" not in _json(out)["sim_calls_by_source"]
+
+
+def _checkpoint_stats(session: object, run_id: int) -> dict:
+    from sqlalchemy import select
+
+    from twisted.store.search import SearchCheckpoint
+
+    query = select(SearchCheckpoint.stats).where(SearchCheckpoint.run_id == run_id)
+    return session.scalars(query).one()  # type: ignore[attr-defined]

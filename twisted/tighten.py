@@ -15,7 +15,11 @@ stored configuration:
    P-data and :func:`twisted.knots.identify` the knot. The ends are now far apart and outside the knot,
    so both closures agree unless something is wrong (the result says so).
 
-Deterministic given the state: it starts from ``set_state`` like every curve. The module sits beside
+Deterministic given the state: it starts from ``set_state`` like every curve.
+
+The same pull, followed by letting go of both ends and letting the rope settle, is the planner's
+*cinch* (:func:`cinch`, docs/DESIGN.md section 8): an overhand tied on the way to a granny or a square
+is pulled tight so that the rest of the rope is free for the second one. The module sits beside
 ``twisted.knots`` in the layers (docs/DESIGN.md section 1): it drives the simulator through ``RopeSim``'s
 public methods and names the knot, so ``twisted.sim`` stays physics only.
 """
@@ -66,6 +70,19 @@ class Tightened:
     def knot_name(self) -> str | None:
         """The knot of the tightened rope (``"knotoid"`` when its closures still differ), None if not ok."""
         return None if self.knot is None else self.knot.name
+
+
+@dataclass(frozen=True, slots=True)
+class Cinched:
+    """Outcome of :func:`cinch`: the rope pulled tight, let go and settled. ``ok=False`` comes with the
+    reason (the pull or the settling was rejected); otherwise the configuration and what it ties."""
+
+    ok: bool
+    reason: str | None
+    state: FloatArray | None  # RopeSim.state() of the settled rope
+    points: FloatArray | None
+    p_data: PData | None
+    sim_seconds: float
 
 
 def tightening_sim(friction_scale: float = 1.0) -> RopeSim:
@@ -159,3 +176,24 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
     if (reason := sim.invalid_reason(PULL_WORKSPACE_RADIUS_M)) is not None:
         return result(reason)
     return result(None)
+
+
+def cinch(sim: RopeSim, state: npt.ArrayLike) -> Cinched:
+    """Pull the rope in ``state`` tight (:func:`tighten`), let go of both ends and let it settle.
+
+    The knot stays as the pull left it, compact, with the ends lying free: an overhand tied loosely in
+    the middle of the rope takes most of it, a cinched one a few links. Deterministic given ``state``.
+    """
+    pulled = tighten(sim, state)
+    if not pulled.ok:
+        return Cinched(False, pulled.reason, None, None, None, pulled.sim_seconds)
+    sim.release()
+    reason, steps = sim.settle()
+    sim_seconds = pulled.sim_seconds + steps * float(sim.model.opt.timestep)
+    if reason is not None:
+        return Cinched(False, f"after the pull: {reason}", None, None, None, sim_seconds)
+    try:
+        p_data = sim.p_data()
+    except PDataError as exc:
+        return Cinched(False, f"cinched rope has no P-data: {exc}", None, None, None, sim_seconds)
+    return Cinched(True, None, sim.state(), sim.link_points(), p_data, sim_seconds)

@@ -38,7 +38,7 @@ WITH RECURSIVE tree(node_id, depth) AS (
 SELECT t.depth, n.seq, parent.seq AS parent_seq,
        CASE WHEN n.id IN (SELECT node_id FROM plan) THEN 'plan' ELSE '' END AS on_plan,
        n.points, n.cross AS crossings, s.knot_type,
-       n.link, ROUND(n.z_max_m, 3) AS z_max_m, ROUND(n.x_m, 3) AS x_m, ROUND(n.y_m, 3) AS y_m,
+       n.action, n.link, ROUND(n.z_max_m, 3) AS z_max_m, ROUND(n.x_m, 3) AS x_m, ROUND(n.y_m, 3) AS y_m,
        n.iteration, n.sim_call, ROUND(n.created_s, 2) AS created_s, n.id AS node_id, s.key AS state
 FROM page t
 JOIN search_nodes n ON n.id = t.node_id
@@ -146,8 +146,9 @@ QUERIES: dict[str, dict[str, Any]] = {
     "run_tree": {
         "title": "A planner run's tree, by depth",
         "description_html": (
-            "The search tree of run <code>run_id</code>, breadth first: each node's state, the curve "
-            "that reached it from its parent (link, z_max_m, x_m, y_m) and its rope from above; "
+            "The search tree of run <code>run_id</code>, breadth first: each node's state, what "
+            "reached it from its parent (a curve: link, z_max_m, x_m, y_m; or a cinch, the rope pulled "
+            "tight and let go) and its rope from above; "
             "<code>plan</code> marks the found plan. " + _PAGED
         ),
         "sql": RUN_TREE,

@@ -84,7 +84,7 @@ def option(default: Any, help: str, **spec: Any) -> Any:
 @dataclass(frozen=True)
 class PlannerOptions:
     """Algorithm options; the defaults are the paper's values except ``k``, ``p_expand``,
-    ``k_expand``, ``retry_weight``, ``cross_move`` and ``r1_room``, which measured searches set
+    ``k_expand``, ``retry_weight``, ``cross_move``, ``r1_room`` and ``cinch``, which measured searches set
     (DESIGN 8)."""
 
     planner: str = option(
@@ -140,6 +140,15 @@ class PlannerOptions:
         must=f"be a number of links in [0, {N_LINKS}]",
         commands=EVALUATED,
         before=0.0,
+        before_in_evals=True,
+    )
+    cinch: bool = option(
+        True,
+        "Toward a composite knot (granny, square): a node whose rope ties one of its summands is pulled "
+        "tight and let go once before a step starts from it, and its state's steps start from the "
+        "cinched nodes (--no-cinch: never).",
+        commands=EVALUATED,
+        before=False,
         before_in_evals=True,
     )
     tighten: bool = option(

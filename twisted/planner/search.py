@@ -49,7 +49,7 @@ import numpy as np
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
 from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
-from twisted.planner.tree import Node, SearchTree, kind_key, pair_key
+from twisted.planner.tree import CINCH, Node, SearchTree, kind_key, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
@@ -81,7 +81,7 @@ __all__ = [
 # [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", for
 # analysis)
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross", "kind")
-CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only")
+CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only", "cinch")
 
 
 # --- what the search composes -------------------------------------------------------------------------
@@ -204,6 +204,8 @@ class Twisted:
             # a checkpoint written before a table existed starts it empty
             self.stats = {table: dict(checkpoint.stats.get(table, {})) for table in STATS_TABLES}
 
+        if self.parts.cinch is not None:
+            self.parts.cinch.restore(tree)
         # P: the high-level plans from every reached state (recomputed from the plan cache on resume)
         self.plans: dict[str, list[Any]] = {}
         self.goal_node: Node | None = None
@@ -370,6 +372,27 @@ class Twisted:
         self._count("state", s, 1, reward)
         self._count("plan", f"{s}|{plan_index}", 1, reward)
 
+    def cinched(self, node: Node) -> Node:
+        """The node a plan step starts from instead of ``node``: toward a composite knot, a loose node tying
+        a summand is cinched first (``parts.cinch``, :class:`~twisted.planner.strategies.SummandCinch`),
+        and the cinched node takes its place when it is in the same state (else the step starts from
+        ``node``)."""
+        part = self.parts.cinch
+        if part is None or not part.wants(self.tree, node):
+            made = None if part is None else part.tried.get(node.index)
+            same = made is not None and self.tree.nodes[made].p_data == node.p_data
+            return self.tree.nodes[made] if made is not None and same else node
+        try:
+            with self.stop.interruptible():
+                result = part.cinch(node)
+        except StopRequested:
+            raise _Stop("interrupted") from None
+        self.sim_calls += 1
+        child = self.add_to_tree(node, CINCH, result, self.sim_calls)
+        part.tried[node.index] = None if child is None else child.index
+        self._count("calls", "cinch", 1, child is not None)
+        return child if child is not None and child.p_data == node.p_data else node
+
     # -- FollowPlan / RandomExpand -------------------------------------------------------------------
 
     def follow_plan(self, node: Node, plan: Any) -> int:
@@ -378,6 +401,9 @@ class Twisted:
         for step, (next_state, move) in enumerate(zip(plan.states[1:], plan.moves, strict=True)):
             if step:
                 self._check_stop(self._deadline_s)
+            current = self.cinched(current)
+            if self.goal_node is not None:
+                return len(plan.moves)
             curves, scripted = self.step_curves(current, next_state, move)
             children = self.simulate(current, curves, "follow_plan")
             reached = [c is not None and c.p_data == next_state for c in children]

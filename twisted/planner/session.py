@@ -31,6 +31,7 @@ from twisted.planner.search import (
     Twisted,
 )
 from twisted.planner.strategies import Parts, PullTest, default_parts
+from twisted.planner.tree import CINCH
 from twisted.runtime import StopSignals
 from twisted.topology import PData
 
@@ -387,7 +388,9 @@ def tree_from_rows(rows: Sequence[Any]) -> SearchTree:
 
     tree = SearchTree()
     for row in rows:
-        curve = None if row.curve is None else Curve(*row.curve)
+        curve: Any = None if row.curve is None else Curve(*row.curve)
+        if getattr(row, "action", "curve") == "cinch":
+            curve = CINCH
         node = Node(
             index=row.seq,
             parent=row.parent_seq,
@@ -504,11 +507,22 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
         info, path = solved_run(store, run_id)
     except NoPlanError as exc:
         raise PlanInputError(f"{exc}: nothing to replay") from None
-    sim = RopeSim(friction_scale)
+    from twisted.tighten import cinch, tightening_sim
+
+    # a path with a cinch needs the second gripper; the states are the same vectors either way
+    cinched = any(node.action == "cinch" for node in path)
+    sim = tightening_sim(friction_scale) if cinched else RopeSim(friction_scale)
     state = path[0].q
     steps = []
     final_p_data = None
     for node in path[1:]:
+        if node.action == "cinch":
+            pulled = cinch(sim, state)
+            steps.append(ReplayStep(CINCH, node.p_data, pulled.p_data, pulled.reason))
+            if pulled.state is None:
+                break
+            state, final_p_data = pulled.state, pulled.p_data
+            continue
         assert node.curve is not None
         curve = Curve(*node.curve)
         result = simulate(sim, state, curve)

@@ -16,12 +16,16 @@ Monte Carlo tree search takes its evaluator and child-selection function):
   policy (``twisted.rl``), :class:`RandomCurves`, :class:`ScriptedCross` (``twisted.proposals``);
   :class:`StepCurves` draws a plan step's K curves from them;
 - goal tests (``GoalTest``): :class:`StateMatch` (a goal state reached) and :class:`PullTest` (and the
-  rope pulled tight ties the goal's knot, ``twisted.tighten``).
+  rope pulled tight ties the goal's knot, ``twisted.tighten``);
+- :class:`SummandCinch`: toward a composite knot (granny, square), a node whose rope ties one of the
+  summands is pulled tight and let go once (``twisted.tighten.cinch``), and its state's steps start
+  from the cinched nodes (``cinch``, DESIGN 8).
 
 :func:`default_parts` builds the parts that :class:`~twisted.planner.options.PlannerOptions` name
 (the pull test excepted: :mod:`twisted.planner.session` adds it with the run's recorder). Every random
-choice takes the search's one ``numpy.random.Generator``; the parts that keep state (only
-:class:`R1Room`, a cache) forget what an unfinished iteration added (:meth:`Parts.forget`).
+choice takes the search's one ``numpy.random.Generator``; the parts that keep state (:class:`R1Room`, a
+cache, and :class:`SummandCinch`, the nodes it cinched) forget what an unfinished iteration added
+(:meth:`Parts.forget`).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import numpy as np
 
 from twisted.goals import Goal
 from twisted.planner.options import PlannerOptions
-from twisted.planner.tree import Node, SearchTree, pair_key
+from twisted.planner.tree import Node, SearchTree, is_cinched, pair_key
 from twisted.topology import PData
 
 __all__ = [
@@ -56,6 +60,7 @@ __all__ = [
     "StateMatch",
     "StateSelection",
     "StepCurves",
+    "SummandCinch",
     "UcbPlans",
     "UcbStates",
     "UniformPlans",
@@ -157,16 +162,21 @@ class UniformStates:
 
 
 class CrossingStates:
-    """crs: weight ``1 + Cross(s)``; with an :class:`R1Room`, times the room of the best plan of ``s``."""
+    """crs: weight ``1 + Cross(s)``; with an :class:`R1Room`, times the room of the best plan of ``s``;
+    with a :class:`SummandCinch`, times its weight of ``s`` (a state holding a tight rope weighs more)."""
 
-    def __init__(self, room: R1Room | None = None) -> None:
+    def __init__(self, room: R1Room | None = None, cinch: SummandCinch | None = None) -> None:
         self.room = room
+        self.cinch = cinch
 
     def select(self, search: SearchView, candidates: list[str], rng: np.random.Generator) -> str:
         weights = np.array([1.0 + search.tree.states[key].cross for key in candidates])
         if self.room is not None:
             room = self.room
             weights = weights * np.array([max(room.plan_rooms(search, key)) for key in candidates])
+        if self.cinch is not None:
+            cinch = self.cinch
+            weights = weights * np.array([cinch.state_weight(search, key) for key in candidates])
         return candidates[int(rng.choice(len(candidates), p=weights / weights.sum()))]
 
 
@@ -256,16 +266,21 @@ class RetryWeightedNodes:
     replays the paper's choice.
     """
 
-    def __init__(self, retry_weight: float, room: R1Room | None = None) -> None:
+    def __init__(
+        self, retry_weight: float, room: R1Room | None = None, cinch: SummandCinch | None = None
+    ) -> None:
         if not 0.0 < retry_weight <= 1.0:
             raise ValueError(f"retry_weight must lie in (0, 1], got {retry_weight}")
         self.retry_weight = retry_weight
         self.room = room
+        self.cinch = cinch
 
     def select(
         self, search: SearchView, s: str, next_state: PData, move: Any, rng: np.random.Generator
     ) -> Node:
         indices = search.tree.by_state[s]
+        if self.cinch is not None:
+            indices = self.cinch.candidates(search, s, indices)
         pairs, key = search.stats["pair"], next_state.key
         weights = [self.retry_weight ** pairs.get(pair_key(i, key), [0.0])[0] for i in indices]
         if self.room is not None and move is not None and move.kind == "R1" and not move.remove:
@@ -418,6 +433,130 @@ class PullTest:
         return ties
 
 
+# --- cinching the first knot of a composite --------------------------------------------------------------
+
+# A state that ties a summand starts its steps from its tight nodes (cinched, or made from a cinched one)
+# until it has had this many steps per tight node; then also from its loose nodes not cinched yet (the
+# one chosen is cinched).
+CINCH_STEPS = 30
+# cinches of a state's nodes that did not give a node in that state (the knot came undone, the rope
+# was rejected, the pull changed the diagram) before the state's nodes are no longer cinched
+CINCH_FAILURES = 3
+# crs weight of a state that holds a tight node, against 1 for a state reached only by loose ropes
+TIGHT_WEIGHT = 10.0
+
+
+class SummandCinch:
+    """Toward a composite knot goal (granny ``3_1+#3_1+``, square ``3_1+#3_1-``): a node whose rope ties one
+    of the summands (both closures, at its crossing number) is pulled tight and let go once
+    (:func:`twisted.tighten.cinch`) before a plan step starts from it (the node chosen, or one a step
+    reached on the way). The cinched node and every node made from it are *tight*: a state's steps
+    start from its tight nodes when it has any, and the crs choice weighs a state holding one
+    ``TIGHT_WEIGHT`` times.
+
+    A loose overhand takes most of a 21-link rope; pulled tight it takes a few links and leaves the
+    rest free for the second one. Started from the cinched rope of an overhand, searches for a granny
+    took a fraction of the calls they took from the same overhand loose (docs/goals.md, "Cinching the
+    first overhand"). Deterministic: the cinch draws no random number.
+    """
+
+    def __init__(self, goal: Goal) -> None:
+        # knot goals only: a state goal asks for one diagram, and cinching on the way there is unmeasured
+        types = goal.knot_types if getattr(goal, "knot", None) is not None else frozenset()
+        self.summands = frozenset(part for t in types if "#" in t for part in t.split("#"))
+        # a summand's crossing number ("3_1+" -> 3): a state with more crossings that ties it has one the
+        # pull would take out, so only states of exactly these counts are cinched
+        self._crossings = frozenset(int(name.split("_")[0]) for name in self.summands)
+        self._ties: dict[str, bool] = {}
+        # loose node index -> the node its cinch made (None: the cinch gave no node in its state)
+        self.tried: dict[int, int | None] = {}
+        self._tight: list[bool] = []  # per node index: cinched, or made from a tight node
+        self._keys: list[str] = []  # per node index: its state
+        self._tight_in: dict[str, int] = {}  # tight nodes per state
+        self._sim: Any = None
+
+    def ties_summand(self, p_data: PData) -> bool:
+        """Whether a rope in ``p_data`` ties one of the goal's summands (both closures) with as many
+        crossings as that summand's crossing number."""
+        found = self._ties.get(p_data.key)
+        if found is None:
+            from twisted.knots import identify
+
+            found = p_data.cross in self._crossings and identify(p_data).name in self.summands
+            self._ties[p_data.key] = found
+        return found
+
+    def restore(self, tree: SearchTree) -> None:
+        """Learn the cinches of a tree reloaded from the store (a cinch that gave no node is tried again:
+        it gives no node again)."""
+        for node in tree.nodes:
+            if is_cinched(node) and node.parent is not None:
+                self.tried[node.parent] = node.index
+
+    def _sync(self, tree: SearchTree) -> None:
+        """Mark the nodes added since the last call tight or loose (a parent comes before its child)."""
+        for node in tree.nodes[len(self._tight) :]:
+            tight = is_cinched(node) or (node.parent is not None and self._tight[node.parent])
+            self._tight.append(tight)
+            self._keys.append(node.p_data.key)
+            if tight:
+                self._tight_in[node.p_data.key] = self._tight_in.get(node.p_data.key, 0) + 1
+
+    def is_tight(self, tree: SearchTree, index: int) -> bool:
+        """Whether node ``index`` is cinched or made from a cinched node."""
+        self._sync(tree)
+        return self._tight[index]
+
+    def state_weight(self, search: SearchView, s: str) -> float:
+        """``TIGHT_WEIGHT`` for a state holding a tight node, else 1 (a factor of the crs weight)."""
+        self._sync(search.tree)
+        return TIGHT_WEIGHT if self._tight_in.get(s) else 1.0
+
+    def candidates(self, search: SearchView, s: str, indices: list[int]) -> list[int]:
+        """The nodes of state ``s`` a step may start from: its tight nodes when it has any. In a state that
+        ties a summand, only while it has had fewer than ``CINCH_STEPS`` steps per tight node; then also
+        its loose nodes not cinched yet (the one chosen is cinched), never one that was."""
+        self._sync(search.tree)
+        tight = [i for i in indices if self._tight[i]]
+        if not self.ties_summand(search.tree.states[s]):
+            return tight or indices
+        steps = search.stats["step"].get(s, [0.0])[0]
+        if tight and steps < CINCH_STEPS * len(tight):
+            return tight
+        loose = [i for i in indices if not self._tight[i] and self.tried.get(i) is None]
+        return tight + loose or indices
+
+    def wants(self, tree: SearchTree, node: Node) -> bool:
+        """Whether ``node`` is to be cinched now: a loose node tying a summand, not cinched before, in a
+        state whose cinches have failed fewer than ``CINCH_FAILURES`` times."""
+        if self.is_tight(tree, node.index) or node.index in self.tried or not self.ties_summand(node.p_data):
+            return False
+        key = node.p_data.key
+        failed = sum(
+            1
+            for loose, made in self.tried.items()
+            if tree.nodes[loose].p_data.key == key and (made is None or tree.nodes[made].p_data.key != key)
+        )
+        return failed < CINCH_FAILURES
+
+    def cinch(self, node: Node) -> Any:
+        """Pull ``node``'s rope tight and let it go (:class:`twisted.tighten.Cinched`)."""
+        from twisted.tighten import cinch, tightening_sim
+
+        if self._sim is None:
+            self._sim = tightening_sim()
+        return cinch(self._sim, node.q)
+
+    def forget(self, committed: int) -> None:
+        for loose in [i for i, made in self.tried.items() if i >= committed or (made or 0) >= committed]:
+            del self.tried[loose]
+        # the tree is already cut back: the marks of the nodes it dropped go with them
+        while len(self._tight) > committed:
+            key = self._keys.pop()
+            if self._tight.pop():
+                self._tight_in[key] -= 1
+
+
 # --- the bundle -----------------------------------------------------------------------------------------
 
 
@@ -432,11 +571,14 @@ class Parts:
     expand_curves: BlindCurves  # RandomExpand's curves (and the low-level-only baseline's)
     goal_test: GoalTest
     room: R1Room | None = None  # the cache the selections share, forgotten on rollback
+    cinch: SummandCinch | None = None  # toward a composite knot with options.cinch
 
     def forget(self, committed: int) -> None:
         """An unfinished iteration was rolled back to ``committed`` nodes: drop what it cached."""
         if self.room is not None:
             self.room.forget(committed)
+        if self.cinch is not None:
+            self.cinch.forget(committed)
 
 
 def default_parts(
@@ -455,6 +597,9 @@ def default_parts(
             raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
         goal_test = StateMatch(goal)
     room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
+    cinch = SummandCinch(goal) if options.cinch else None
+    if cinch is not None and not cinch.summands:
+        cinch = None  # a prime knot or a state: nothing to cinch on the way
     states: StateSelection
     plans: PlanSelection
     if options.heuristic == "ucb":
@@ -462,15 +607,16 @@ def default_parts(
     elif options.heuristic == "rnd":
         states, plans = UniformStates(), UniformPlans(room)
     else:
-        states, plans = CrossingStates(room), UniformPlans(room)
+        states, plans = CrossingStates(room, cinch), UniformPlans(room)
     random_curves = RandomCurves()
     share = options.cross_move if options.planner == "twisted" else 0.0
     return Parts(
         states=states,
         plans=plans,
-        nodes=RetryWeightedNodes(options.retry_weight, room),
+        nodes=RetryWeightedNodes(options.retry_weight, room, cinch),
         step_curves=StepCurves(sampler if sampler is not None else random_curves, ScriptedCross(), share),
         expand_curves=random_curves,
         goal_test=goal_test,
         room=room,
+        cinch=cinch,
     )

@@ -11,7 +11,23 @@ import numpy as np
 
 from twisted.topology import PData
 
-__all__ = ["Node", "SearchTree", "kind_key", "pair_key"]
+__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "is_cinched", "kind_key", "pair_key"]
+
+
+@dataclass(frozen=True)
+class CinchAction:
+    """What made a node that a cinch made (:func:`twisted.tighten.cinch`: the parent's rope pulled tight
+    and let go), kept where a node's curve would be; the store writes its ``action``."""
+
+    action: str = "cinch"
+
+
+CINCH = CinchAction()
+
+
+def is_cinched(node: Node) -> bool:
+    """Whether ``node`` was made by a cinch, not a curve."""
+    return getattr(node.curve, "action", "curve") == "cinch"
 
 
 def kind_key(move: Any, cross: int) -> str:
@@ -36,7 +52,7 @@ class Node:
     q: np.ndarray  # opaque simulator state (RopeSim.state())
     points: np.ndarray  # (N_POINTS, 3) link points, head first
     p_data: PData
-    curve: Any | None  # twisted.sim.Curve; None for the root
+    curve: Any | None  # twisted.sim.Curve; None for the root; CINCH for a cinched rope
     iteration: int  # iteration that created it (0 = root)
     sim_call: int  # number of the simulator call that produced it (0 = root)
     created_s: float = 0.0  # elapsed search time when it was created

@@ -153,7 +153,8 @@ def render_run(
     def frame(i: int) -> Figure:
         node = path[i]
         fig, _, ax = panel_figure(images[i] if images else None)
-        what = "start" if i == 0 else f"after curve {i}/{n_steps}"
+        step = "the cinch" if node.action == "cinch" else "curve"
+        what = "start" if i == 0 else f"after {step} {i}/{n_steps}"
         goal_mark = ""
         if node.p_data in info.goal:
             tied = f" ({info.goal.knot}: {knot_type_name(node.p_data)})" if info.goal.knot else ""

@@ -284,8 +284,8 @@ class RopeSim:
         d.eq_active[self._weld[link]] = 1
 
     def release(self) -> None:
-        """Open the gripper: no link is welded any more."""
-        self.data.eq_active[self._weld] = 0
+        """Open the gripper (and the tail gripper, if any): no link is welded any more."""
+        self.data.eq_active[:] = 0
 
     # ---- both ends held (the pull test, docs/DESIGN.md section 9.5) ---------------------------------
 
@@ -407,6 +407,15 @@ class RopeSim:
                 return None, steps
         speed = moved / window_s
         return f"rope did not settle within {SETTLE_CAP_S} s (a link still moves at {speed:.3f} m/s)", steps
+
+    def settle(self) -> tuple[str | None, int]:
+        """Let the rope come to rest as a curve's end does (no link held): (reason it was rejected or
+        None, steps); afterwards the kinematics are current and the configuration valid when None."""
+        reason, steps = self._settle()
+        if reason is None:
+            self.forward()
+            reason = self.invalid_reason()
+        return reason, steps
 
     def forward(self) -> None:
         """Recompute the kinematics of the current state (after :meth:`step`, before reading points)."""

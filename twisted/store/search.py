@@ -149,6 +149,9 @@ class SearchNode(Base):
     z_max_m: Mapped[float | None] = mapped_column(Float)
     x_m: Mapped[float | None] = mapped_column(Float)
     y_m: Mapped[float | None] = mapped_column(Float)
+    # what made it from its parent: "curve" (the columns above), or "cinch" (the rope pulled tight and
+    # let go, twisted.tighten.cinch: no curve, the columns above NULL); the root's is "curve"
+    action: Mapped[str] = mapped_column(String(16), default="curve", server_default="curve")
     iteration: Mapped[int] = mapped_column(Integer)
     sim_call: Mapped[int] = mapped_column(Integer)  # 1-based number of the simulation that produced it
     created_s: Mapped[float] = mapped_column(Float)  # search time (s) when it was created
@@ -184,7 +187,7 @@ class NodeLike(Protocol):
     q: np.ndarray
     points: np.ndarray
     p_data: PData
-    curve: Any | None  # has link, z_max_m, x_m, y_m
+    curve: Any | None  # has link, z_max_m, x_m, y_m; or an ``action`` other than "curve" (a cinch)
     iteration: int
     sim_call: int
     created_s: float
@@ -213,6 +216,7 @@ class StoredNode:
     iteration: int
     sim_call: int
     created_s: float
+    action: str = "curve"  # or "cinch": made by pulling the parent's rope tight (no curve)
 
 
 @dataclass
@@ -346,7 +350,8 @@ class SearchRun:
         for node in nodes:
             if node.parent is not None and node.parent not in self._node_ids:
                 flush()  # its parent is in this batch: its id must be known first
-            curve = node.curve
+            action = getattr(node.curve, "action", "curve")
+            curve = node.curve if action == "curve" else None
             row = SearchNode(
                 run_id=self.run_id,
                 seq=node.index,
@@ -359,6 +364,7 @@ class SearchRun:
                 z_max_m=None if curve is None else float(curve.z_max_m),
                 x_m=None if curve is None else float(curve.x_m),
                 y_m=None if curve is None else float(curve.y_m),
+                action=action,
                 iteration=node.iteration,
                 sim_call=node.sim_call,
                 created_s=float(node.created_s),
@@ -486,6 +492,7 @@ def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[Stor
                 iteration=row.iteration,
                 sim_call=row.sim_call,
                 created_s=row.created_s,
+                action=row.action,
             )
         )
     return out
