@@ -149,12 +149,13 @@ def render_run(
     info, path = _solved_run(store, run_id)
     images, backend = gl_top_views([n.q for n in path]) if gl else (None, "OpenGL not requested (--no-gl)")
     n_steps = len(path) - 1
+    unit = "step" if any(node.action == "cinch" for node in path) else "curve"  # a cinch is a step, no curve
 
     def frame(i: int) -> Figure:
         node = path[i]
         fig, _, ax = panel_figure(images[i] if images else None)
-        step = "the cinch" if node.action == "cinch" else "curve"
-        what = "start" if i == 0 else f"after {step} {i}/{n_steps}"
+        cinched = ": the cinch" if node.action == "cinch" else ""
+        what = "start" if i == 0 else f"after {unit} {i}/{n_steps}{cinched}"
         goal_mark = ""
         if node.p_data in info.goal:
             tied = f" ({info.goal.knot}: {knot_type_name(node.p_data)})" if info.goal.knot else ""
