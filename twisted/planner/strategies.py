@@ -454,8 +454,8 @@ class SummandCinch:
     start from its tight nodes when it has any, and the crs choice weighs a state holding one
     ``TIGHT_WEIGHT`` times.
 
-    A loose overhand takes most of a 21-link rope; pulled tight it takes a few links and leaves the
-    rest free for the second one. Started from the cinched rope of an overhand, searches for a granny
+    A loose overhand spreads its loops over the rope where the second one must be made; pulled tight it
+    is compact and leaves the rest free. Started from the cinched rope of an overhand, searches for a granny
     took a fraction of the calls they took from the same overhand loose (docs/goals.md, "Cinching the
     first overhand"). Deterministic: the cinch draws no random number.
     """
