@@ -41,8 +41,8 @@ def _curve_row(curve: Any) -> dict[str, Any]:
     action = getattr(curve, "action", "curve")
     if action != "curve":
         return {"action": action, "link": None, "z_max_m": None, "x_m": None, "y_m": None}
-    return {"action": action, "link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m,
-            "y_m": curve.y_m}
+    parameters = {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
+    return {"action": action, **parameters}
 
 
 def _curve_cells(row: dict[str, Any]) -> list[str]:

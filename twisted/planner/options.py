@@ -144,9 +144,9 @@ class PlannerOptions:
     )
     cinch: bool = option(
         True,
-        "Toward a composite knot (granny, square): a node whose rope ties one of its summands is pulled "
-        "tight and let go once before a step starts from it, and its state's steps start from the "
-        "cinched nodes (--no-cinch: never).",
+        "Toward a granny or a square: a rope that ties an overhand is pulled tight and let go once before "
+        "a step starts from it, and the steps start from such tight ropes, and from ropes made from them, "
+        "where a state has any (--no-cinch: never).",
         commands=EVALUATED,
         before=False,
         before_in_evals=True,

@@ -18,8 +18,9 @@ Monte Carlo tree search takes its evaluator and child-selection function):
 - goal tests (``GoalTest``): :class:`StateMatch` (a goal state reached) and :class:`PullTest` (and the
   rope pulled tight ties the goal's knot, ``twisted.tighten``);
 - :class:`SummandCinch`: toward a composite knot (granny, square), a node whose rope ties one of the
-  summands is pulled tight and let go once (``twisted.tighten.cinch``), and its state's steps start
-  from the cinched nodes (``cinch``, DESIGN 8).
+  summands is pulled tight and let go once (``twisted.tighten.cinch``); steps start from the tight
+  ropes (cinched, or made from a cinched one) where a state has any, and the crs choice weighs such a
+  state more (``cinch``, DESIGN 8).
 
 :func:`default_parts` builds the parts that :class:`~twisted.planner.options.PlannerOptions` name
 (the pull test excepted: :mod:`twisted.planner.session` adds it with the run's recorder). Every random
