@@ -181,9 +181,9 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
 def cinch(sim: RopeSim, state: npt.ArrayLike) -> Cinched:
     """Pull the rope in ``state`` tight (:func:`tighten`), let go of both ends and let it settle.
 
-    The knot stays as the pull left it, compact and with its loops closed, and the ends lie free (an
-    overhand's ends came 0.45 -> 0.53 m apart on the 0.84 m rope, bench/cinch_start.py). Deterministic
-    given ``state``.
+    The knot stays as the pull left it, compact and with its loops closed, and the ends lie free (the
+    ends of seven overhands lay 0.08-0.45 m apart loose and 0.41-0.55 m cinched on the 0.84 m rope,
+    bench/cinch_start.py). Deterministic given ``state``.
     """
     pulled = tighten(sim, state)
     if not pulled.ok:
