@@ -376,12 +376,10 @@ class Twisted:
         """The node a plan step starts from instead of ``node``: toward a composite knot, a loose node tying
         a summand is cinched first (``parts.cinch``, :class:`~twisted.planner.strategies.SummandCinch`),
         and the cinched node takes its place when it is in the same state (else the step starts from
-        ``node``)."""
+        ``node``). A loose node cinched before is never chosen again (``SummandCinch.candidates``)."""
         part = self.parts.cinch
         if part is None or not part.wants(self.tree, node):
-            made = None if part is None else part.tried.get(node.index)
-            same = made is not None and self.tree.nodes[made].p_data == node.p_data
-            return self.tree.nodes[made] if made is not None and same else node
+            return node
         try:
             with self.stop.interruptible():
                 result = part.cinch(node)

@@ -467,7 +467,9 @@ class SummandCinch:
         self.summands = frozenset(part for t in types if "#" in t for part in t.split("#"))
         # a summand's crossing number ("3_1+" -> 3): a state with more crossings that ties it has one the
         # pull would take out, so only states of exactly these counts are cinched
-        self._crossings = frozenset(int(name.split("_")[0]) for name in self.summands)
+        from twisted.knots import crossing_number
+
+        self._crossings = frozenset(crossing_number(name) for name in self.summands)
         self._ties: dict[str, bool] = {}
         # loose node index -> the node its cinch made (None: the cinch gave no node in its state)
         self.tried: dict[int, int | None] = {}
