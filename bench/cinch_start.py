@@ -41,26 +41,19 @@ def _cli(db: Path, *args: str) -> dict[str, Any]:
     return dict(json.loads(out[out.index("{") : out.rindex("}") + 1]))
 
 
-def _seeds(text: str) -> list[int]:
-    low, _, high = text.partition("-")
-    return list(range(int(low), int(high or low) + 1))
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dir", required=True, type=Path, help="folder for the two databases (made if absent)")
-    ap.add_argument("--overhands", default="0-7", help="seeds of the overhand plans, e.g. 0-7")
+    ap.add_argument("--overhands", default="0-7", help="overhand seeds, as --seeds: 0-7, '0 3 5'")
     ap.add_argument("--timeout", type=float, default=240.0, help="search time limit of each granny search")
     ap.add_argument("--seed", type=int, default=0, help="seed of the granny searches")
     args = ap.parse_args()
 
-    from sqlalchemy import select
-
+    from cli.options import parse_seeds
     from twisted.knots import identify
     from twisted.store import open_store
-    from twisted.store.models import blob_to_array
     from twisted.store.queries import add_configuration
-    from twisted.store.search import SearchNode, SearchRunRow
+    from twisted.store.search import solved_run
     from twisted.tighten import cinch, tightening_sim
     from twisted.topology import top
 
@@ -71,19 +64,16 @@ def main() -> None:
             Path(f"{path}{suffix}").unlink(missing_ok=True)
 
     ropes = []
-    for seed in _seeds(args.overhands):
+    for seed in parse_seeds(args.overhands):
         result = _cli(
             overhands, "plan", "--knot", "overhand", "--workers", "1", "--seed", str(seed), "--timeout", "120"
         )
         if not result["solved"]:
             print(f"overhand seed {seed}: not solved, skipped")
             continue
-        with open_store(f"sqlite:///{overhands}") as store, store.session() as session:
-            node_id = session.scalars(
-                select(SearchRunRow.goal_node_id).where(SearchRunRow.run_id == result["run_id"])
-            ).one()
-            node = session.get_one(SearchNode, node_id)
-            ropes.append((seed, blob_to_array(node.q), blob_to_array(node.points, (-1, 3))))
+        with open_store(f"sqlite:///{overhands}") as store:
+            end = solved_run(store, result["run_id"])[1][-1]  # the goal node: a loose overhand
+        ropes.append((seed, end.q, end.points))
 
     def apart(points: np.ndarray) -> float:
         return float(np.linalg.norm(points[-1, :2] - points[0, :2]))

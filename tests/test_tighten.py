@@ -214,16 +214,11 @@ def test_a_knotoid_goal_names_no_knot_and_replay_tighten_exits_3(tmp_path: Path)
 
 def _final_configuration(db: str, run_id: int) -> tuple[np.ndarray, np.ndarray]:
     """The q and the link points of a solved run's goal node."""
-    from sqlalchemy import select
+    from twisted.store.search import solved_run
 
-    from twisted.store.models import blob_to_array
-    from twisted.store.search import SearchNode, SearchRunRow
-
-    with open_store(db) as store, store.session() as session:
-        query = select(SearchRunRow.goal_node_id).where(SearchRunRow.run_id == run_id)
-        goal_node = session.scalars(query).one()
-        node = session.get_one(SearchNode, goal_node)
-        return blob_to_array(node.q), blob_to_array(node.points, (-1, 3))
+    with open_store(db) as store:
+        end = solved_run(store, run_id)[1][-1]
+    return end.q, end.points
 
 
 def test_a_cinched_overhand_is_the_same_trefoil_in_fewer_links_with_its_ends_free(
