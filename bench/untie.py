@@ -131,12 +131,12 @@ def retie(args: argparse.Namespace) -> list[dict[str, Any]]:
         sampler, _ = curve_sampler(store, "twisted")
         for run_id in args.runs or _tied_runs(store, knot=args.from_knot):
             for seed in args.seeds:
-                options = PlannerOptions(seed=seed, tighten=args.tighten)
+                options = PlannerOptions(seed=seed, tighten=args.tighten, cinch=not args.no_cinch)
                 search, result, wall = _search(
                     store, pool, sampler, goal, options, args.timeout, from_run=run_id,
                     removal_curves=args.removal_curves[0],
                 )  # fmt: skip
-                row = _row(run_id, args.from_knot or "", search, result, wall, seed=seed)
+                row = _row(run_id, args.from_knot or "", search, result, wall, seed=seed, cinch=options.cinch)
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     _summary(rows, "goal")
@@ -180,6 +180,9 @@ def main() -> None:
     sub.choices["retie"].add_argument("--from-knot", default="overhand")
     sub.choices["retie"].add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     sub.choices["retie"].add_argument("--tighten", action="store_true")
+    sub.choices["retie"].add_argument(
+        "--no-cinch", action="store_true", help="the planner's --no-cinch (toward a granny or a square)"
+    )
     for p in sub.choices.values():
         p.add_argument("--db", required=True)
         p.add_argument("--timeout", type=float, default=120.0, help="seconds per search")
