@@ -10,6 +10,16 @@ node of the tree (parent, state, curve, iteration, simulator call), the statisti
 state at the end, the outcome, the goal node and the pull tests. A case whose options no longer exist
 is reported as such (the option was removed, so the search it names can no longer be asked for).
 Exit 0 when every digest run matches the recorded one, 1 otherwise. Takes a few minutes on one core.
+
+The recorded digests of the cases that draw model curves hold for the machine that recorded them: the
+model's float32 kernels (torch's and oneDNN's, chosen by the CPU's instruction set) round differently
+between CPUs, a curve parameter moves in its last bits, the rope ends elsewhere and the search goes
+another way (2026-12-04: on an AVX-512 machine every model case differed from the digests recorded on
+the machine before, and each set of kernels forced with ``ATEN_CPU_CAPABILITY``,
+``ONEDNN_MAX_CPU_ISA`` and ``MKL_ENABLE_INSTRUCTIONS`` gave a digest of its own; ``random-low`` and
+``low-level-only`` were the same). To check a refactoring on a new machine, ``--record`` at the commit
+before it, then compare at the commit after. The tests compare the two model-free cases with the
+recorded digests and replay a model case twice on one machine.
 """
 
 from __future__ import annotations
