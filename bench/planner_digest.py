@@ -12,7 +12,7 @@ is reported as such (the option was removed, so the search it names can no longe
 Exit 0 when every digest run matches the recorded one, 1 otherwise. Takes a few minutes on one core.
 
 The recorded digests of the cases that draw model curves hold for the machine that recorded them: the
-model's float32 kernels (torch's and oneDNN's, chosen by the CPU's instruction set) round differently
+model's float32 kernels (torch's, chosen by the CPU's instruction set) round differently
 between CPUs, a curve parameter moves in its last bits, the rope ends elsewhere and the search goes
 another way (2026-12-04: on an AVX-512 machine every model case differed from the digests recorded on
 the machine before, and each set of kernels forced with ``ATEN_CPU_CAPABILITY``,

@@ -419,9 +419,9 @@ def _digest_bench() -> Any:
 
 @pytest.mark.parametrize("case", ["random-low", "low-level-only"])
 def test_a_fixed_seed_search_is_the_one_recorded_before_the_planner_was_split_into_parts(case: str) -> None:
-    """The searches that draw no model curves replay the recorded digest on any machine. Those that do are
-    checked on one machine only (next test): the model's float kernels differ between CPUs (the bench's
-    docstring)."""
+    """The searches that draw no model curves replayed the recorded digest on both machines they have met.
+    Those that do are checked on one machine only (next test): the model's float kernels differ between
+    CPUs (the bench's docstring)."""
     bench = _digest_bench()
     recorded = json.loads(bench.RECORDED.read_text())[case]
     out = bench.run_case(case)
