@@ -16,7 +16,7 @@ from twisted.goals import PlanInputError
 from twisted.moves import Move, successors
 from twisted.planner import PlannerOptions, planner_options
 from twisted.planner.options import N_LINKS as PLANNER_N_LINKS
-from twisted.proposals import across_curve, cross_move_curve, segment_bounds
+from twisted.proposals import across_curve, cross_fit, cross_move_curve, segment_bounds
 from twisted.sim import N_LINKS, RopeSim, sample_curve
 from twisted.topology import PData, top
 
@@ -102,6 +102,28 @@ def test_a_move_that_is_not_a_cross_of_this_rope_is_refused() -> None:
         cross_move_curve(rng, points, Move("Cross", 6, sign="+", over="O", other_segment=1, other_side="L"))
 
 
+def test_the_sign_fit_of_a_cross_move_and_of_its_other_sign_share_the_segment() -> None:
+    """Every aimed point of the crossed segment gives one sign to a straight carry of the tip: the fits
+    of a Cross move and of the same move with the other sign add up to 1 (the other side it arrives from).
+    And where no point fits, the scripted curve still carries the tip across (with the other sign)."""
+    for n in (1, 2):
+        _, points = _rope(n)
+        moves = [move for _, move in _cross_moves(top(points))]
+        assert moves
+        twins = 0
+        for move in moves:
+            fit = cross_fit(points, move)
+            assert 0.0 <= fit <= 1.0 and cross_fit(points, move, segment_bounds(points)) == fit
+            where = (move.segment, move.other_segment, move.over)
+            for twin in moves:  # the same crossing arriving from the other side, where the state allows both
+                if (twin.segment, twin.other_segment, twin.over) == where and twin.sign != move.sign:
+                    twins += 1
+                    assert fit + cross_fit(points, twin) == pytest.approx(1.0)
+        assert twins >= 4
+        unfit = next(m for m in moves if cross_fit(points, m) == 0.0)
+        assert isinstance(cross_move_curve(np.random.default_rng(0), points, unfit).link, int)
+
+
 def test_cross_move_curves_make_their_move_in_the_simulator_more_often_than_random_curves() -> None:
     """From a 1-crossing rope, 6 scripted and 6 uniform random curves toward each of its 12 Cross moves
     (over many seeded ropes: 8 % to 40 % of the scripted curves make their move at one crossing, 0 % to
@@ -137,7 +159,6 @@ def test_the_cross_move_share_and_r1_room_are_checked_and_old_runs_resume_withou
     stored = PlannerOptions(cross_move=0.5, r1_room=4.0).to_dict()
     assert PlannerOptions.from_dict(stored).cross_move == 0.5
     del stored["cross_move"], stored["r1_room"]
-    assert (
-        PlannerOptions.from_dict(stored).cross_move == 0.0 and PlannerOptions.from_dict(stored).r1_room == 0.0
-    )
+    old = PlannerOptions.from_dict(stored)
+    assert old.cross_move == 0.0 and old.r1_room == 0.0
     assert PLANNER_N_LINKS == N_LINKS  # the planner's copy of the rope's link count

@@ -24,7 +24,7 @@ section 8).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +32,14 @@ import numpy.typing as npt
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, sample_curve
 from twisted.topology import cross2, projected_crossings
 
-__all__ = ["CURVE_PROPOSALS", "across_curve", "cross_move_curve", "propose_curve", "segment_bounds"]
+__all__ = [
+    "CURVE_PROPOSALS",
+    "across_curve",
+    "cross_fit",
+    "cross_move_curve",
+    "propose_curve",
+    "segment_bounds",
+]
 
 CURVE_PROPOSALS = ("uniform", "across")
 
@@ -104,12 +111,24 @@ def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return np.concatenate([[0.0], visits, [float(len(pts) - 1)]])
 
 
-def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: CrossMove) -> Curve:
-    """A curve aimed at making ``move`` (a ``Cross``) from the rope with these N_POINTS link points."""
-    pts = np.asarray(points, dtype=np.float64)
+class _CrossAim(NamedTuple):
+    """Where a Cross move can be aimed on a rope: points ``at`` of the crossed segment b (rope parameter
+    ``s``, link ``link_of``, direction ``along``), the tip, the unit vectors ``towards`` from the tip to
+    each point, their distances, and whether a straight approach to each gives the move's sign."""
+
+    s: npt.NDArray[np.float64]
+    link_of: npt.NDArray[np.int64]
+    at: npt.NDArray[np.float64]
+    head: bool
+    tip: npt.NDArray[np.float64]
+    towards: npt.NDArray[np.float64]
+    dist: npt.NDArray[np.float64]
+    fits: npt.NDArray[np.bool_]
+
+
+def _cross_aim(pts: npt.NDArray[np.float64], move: CrossMove, bounds: npt.NDArray[np.float64]) -> _CrossAim:
     if move.other_segment is None or move.over not in ("O", "U") or move.sign not in ("+", "-"):
         raise ValueError(f"not a Cross move: {move}")
-    bounds = segment_bounds(pts)
     if not 0 <= move.other_segment < len(bounds) - 1 or move.segment not in (0, len(bounds) - 2):
         raise ValueError(f"{move} does not fit a rope with {len(bounds) // 2 - 1} crossings")
     lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
@@ -126,19 +145,35 @@ def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: Cros
     # the rope's walking direction (head -> tail) along the tip's piece where it will cross b
     walk = -towards if head else towards
     d_over, d_under = (walk, along[:, :2]) if move.over == "O" else (along[:, :2], walk)
-    signs = np.sign(cross2(d_over, d_under))
-    fits = signs == (1 if move.sign == "+" else -1)
-    weights = np.exp(-dist / CROSS_REACH_M) * (fits if fits.any() else 1.0)
-    c = int(rng.choice(len(s), p=weights / weights.sum()))
+    fits = np.sign(cross2(d_over, d_under)) == (1 if move.sign == "+" else -1)
+    return _CrossAim(s, link_of, at, head, tip, towards, dist, fits)
+
+
+def cross_fit(points: npt.ArrayLike, move: CrossMove, bounds: npt.NDArray[np.float64] | None = None) -> float:
+    """The share of the points of ``move``'s crossed segment that a straight approach crosses with the
+    move's sign: 0 when the tip lies on the wrong side of the whole segment, so that a straight carry
+    makes the crossing with the other sign (DESIGN 8). ``bounds``: :func:`segment_bounds` of the points,
+    when known."""
+    pts = np.asarray(points, dtype=np.float64)
+    aim = _cross_aim(pts, move, segment_bounds(pts) if bounds is None else bounds)
+    return float(aim.fits.mean())
+
+
+def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: CrossMove) -> Curve:
+    """A curve aimed at making ``move`` (a ``Cross``) from the rope with these N_POINTS link points."""
+    pts = np.asarray(points, dtype=np.float64)
+    aim = _cross_aim(pts, move, segment_bounds(pts))
+    weights = np.exp(-aim.dist / CROSS_REACH_M) * (aim.fits if aim.fits.any() else 1.0)
+    c = int(rng.choice(len(aim.s), p=weights / weights.sum()))
     beyond = rng.uniform(*CROSS_BEYOND_M)
     lift = rng.uniform(*CROSS_LIFT_M)
     if move.over == "O":
-        end = 0 if head else N_LINKS - 1
-        link = end if rng.random() < CROSS_TIP_LINK_P else end + (1 if head else -1)
-        target = at[c, :2] + beyond * towards[c]
+        end = 0 if aim.head else N_LINKS - 1
+        link = end if rng.random() < CROSS_TIP_LINK_P else end + (1 if aim.head else -1)
+        target = aim.at[c, :2] + beyond * aim.towards[c]
     else:
-        link = int(link_of[c])
-        target = tip[:2] - beyond * towards[c]
+        link = int(aim.link_of[c])
+        target = aim.tip[:2] - beyond * aim.towards[c]
     centre = 0.5 * (pts[link, :2] + pts[link + 1, :2])
     x, y = np.clip(target - centre, CURVE_LOW[2:], CURVE_HIGH[2:])
     return Curve(link, float(lift), float(x), float(y))

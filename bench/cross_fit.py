@@ -1,0 +1,47 @@
+"""Which Cross steps can a straight carry make? The stored searches' Cross steps by the node's sign fit.
+
+    python bench/cross_fit.py --db sqlite:///tune.db --set tune-u5 [--label L ...]
+
+A Cross move lays the tip of an end segment over or under segment b with a given sign; which sign a
+straight carry of the tip makes depends on the side of b the tip starts from. ``twisted.proposals.
+cross_fit`` is the share of the points of b that a straight approach from the tip crosses with the
+move's sign (the points the scripted Cross curve aims at). This reads every (node, requested next state)
+pair of the stored runs (``bench/step_moves.py``'s ``stored_pairs``) whose step one adding Cross move
+explains, and prints, per crossing count and fit class (none: 0, some, all: 1), the pairs, the steps
+tried and those that reached their state.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+
+from step_moves import stored_pairs  # bench/ is this script's folder
+
+from twisted.proposals import cross_fit
+from twisted.store import open_store
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--db", required=True)
+    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
+    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    args = ap.parse_args()
+    store = open_store(args.db)
+    table: dict[tuple[int, str], list[float]] = defaultdict(lambda: [0, 0.0, 0.0])
+    for _, _, node, _, move, tried, reached in stored_pairs(store, args.sets, args.labels):
+        if move is None or move.kind != "Cross" or move.remove:
+            continue
+        fit = cross_fit(node.points, move)
+        row = table[(node.p_data.cross, "none" if fit == 0 else "all" if fit == 1 else "some")]
+        row[0] += 1
+        row[1] += tried
+        row[2] += reached
+    print(f"{'from':>4s} {'fit':>5s} {'pairs':>6s} {'steps':>6s} {'reached':>8s} {'rate':>6s}")
+    for (cross, fit), (pairs, tried, reached) in sorted(table.items()):
+        print(f"{cross:4d} {fit:>5s} {pairs:6d} {tried:6.0f} {reached:8.0f} {reached / max(tried, 1):6.1%}")
+
+
+if __name__ == "__main__":
+    main()
