@@ -17,9 +17,9 @@ A *Cross move curve* is aimed at one high-level move, ``Cross(end segment e, seg
 picks a point of b near the tip of e, and carries a link across: for "O" the tip's own link, lifted
 over b; for "U", which a lifted tip cannot make, the link of b at that point, lifted over the tip
 (the same crossing seen from the other strand). Only points of b where such a crossing would get
-the move's sign are aimed at (the sign is what tells the two sides of b apart), nearer ones more
-often. It is geometry only; whether it made the move is for the simulator to say (docs/DESIGN.md
-section 8).
+the move's sign are aimed at (the sign is what tells the two sides of b apart; their share is
+:func:`cross_fit`), nearer ones more often, and any point where there are none. It is geometry
+only; whether it made the move is for the simulator to say (docs/DESIGN.md section 8).
 """
 
 from __future__ import annotations
@@ -113,8 +113,9 @@ def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:
 
 class _CrossAim(NamedTuple):
     """Where a Cross move can be aimed on a rope: points ``at`` of the crossed segment b (rope parameter
-    ``s``, link ``link_of``, direction ``along``), the tip, the unit vectors ``towards`` from the tip to
-    each point, their distances, and whether a straight approach to each gives the move's sign."""
+    ``s``, on link ``link_of``), which end's tip moves (``head``) and where it lies, the unit vectors
+    ``towards`` from the tip to each point and their distances ``dist``, and whether a straight
+    approach to each point gives the move's sign (``fits``)."""
 
     s: npt.NDArray[np.float64]
     link_of: npt.NDArray[np.int64]
