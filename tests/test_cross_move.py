@@ -105,7 +105,7 @@ def test_a_move_that_is_not_a_cross_of_this_rope_is_refused() -> None:
 def test_the_sign_fit_of_a_cross_move_and_of_its_other_sign_share_the_segment() -> None:
     """Every aimed point of the crossed segment gives one sign to a straight carry of the tip: the fits
     of a Cross move and of the same move with the other sign add up to 1 (the other side it arrives from).
-    And where no point fits, the scripted curve still carries the tip across (with the other sign)."""
+    Where no point fits, the scripted curve is still drawn (aimed at any point of the segment)."""
     for n in (1, 2):
         _, points = _rope(n)
         moves = [move for _, move in _cross_moves(top(points))]
