@@ -159,6 +159,7 @@ def test_the_cross_move_share_and_r1_room_are_checked_and_old_runs_resume_withou
     stored = PlannerOptions(cross_move=0.5, r1_room=4.0).to_dict()
     assert PlannerOptions.from_dict(stored).cross_move == 0.5
     del stored["cross_move"], stored["r1_room"]
-    old = PlannerOptions.from_dict(stored)
-    assert old.cross_move == 0.0 and old.r1_room == 0.0
+    assert (
+        PlannerOptions.from_dict(stored).cross_move == 0.0 and PlannerOptions.from_dict(stored).r1_room == 0.0
+    )
     assert PLANNER_N_LINKS == N_LINKS  # the planner's copy of the rope's link count
