@@ -31,9 +31,11 @@ __all__ = [
     "cross2",
     "json_int",
     "mirror",
+    "p_data_of",
     "parse_p_data",
     "projected_crossings",
     "reverse",
+    "segment_hits",
     "top",
     "Top",
 ]
@@ -269,6 +271,21 @@ class ProjectedCrossings:
         return len(self.i)
 
 
+def segment_hits(
+    start_i: FloatArray, d_i: FloatArray, start_j: FloatArray, d_j: FloatArray
+) -> tuple[npt.NDArray[np.bool_], FloatArray, FloatArray]:
+    """Whether 2-D segments ``start_i + t d_i`` and ``start_j + u d_j`` cross, with ``t`` and ``u`` in
+    the half-open ``[0, 1)``; parallel segments (``|d_i x d_j| <= 1e-15``) never do. Broadcast over the
+    leading axes; returns (hit, t, u)."""
+    w = start_j - start_i
+    denom = cross2(d_i, d_j)
+    ok = np.abs(denom) > 1e-15
+    safe = np.where(ok, denom, 1.0)
+    t = cross2(w, d_j) / safe
+    u = cross2(w, d_i) / safe
+    return ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1), t, u
+
+
 def projected_crossings(
     points: npt.ArrayLike, *, closed: bool = False, ties: TieRule = "earlier_over"
 ) -> ProjectedCrossings:
@@ -305,14 +322,8 @@ def projected_crossings(
         d = pts[1:] - pts[:-1]
         i_idx, j_idx = np.triu_indices(len(d), k=2)
         tested = np.ones(len(i_idx), dtype=bool)
-    di, dj = d[i_idx, :2], d[j_idx, :2]
-    w = start[j_idx, :2] - start[i_idx, :2]
-    denom = cross2(di, dj)
-    ok = (np.abs(denom) > 1e-15) & tested
-    safe = np.where(ok, denom, 1.0)
-    t = cross2(w, dj) / safe
-    u = cross2(w, di) / safe
-    hit = ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1)
+    hit, t, u = segment_hits(start[i_idx, :2], d[i_idx, :2], start[j_idx, :2], d[j_idx, :2])
+    hit &= tested
     i_idx, j_idx, t, u = i_idx[hit], j_idx[hit], t[hit], u[hit]
     zi = start[i_idx, 2] + t * d[i_idx, 2]
     zj = start[j_idx, 2] + u * d[j_idx, 2]
@@ -341,7 +352,12 @@ def top(points: npt.ArrayLike) -> PData:
         raise ValueError(f"points must have shape (N+1, 3), got {pts.shape}")
     if not np.all(np.isfinite(pts)):
         raise ValueError("points contain NaN or infinity")
-    pc = projected_crossings(pts)
+    return p_data_of(projected_crossings(pts))
+
+
+def p_data_of(pc: ProjectedCrossings) -> PData:
+    """The P-data of an open rope's crossings (:func:`projected_crossings`, or crossings whose over
+    strands and signs a caller decided otherwise, as ``twisted.drag`` does)."""
     k = len(pc)
     if k == 0:
         return EMPTY
