@@ -12,8 +12,8 @@ higher (on a tie, the earlier link); the signs follow from the directions as in 
 
 It is wrong more often than right (friction, pushing, stiffness and the drop at release are all left
 out; ``bench/drag_steps.py`` measures it), but in a batch it costs well under a millisecond a curve
-where a simulated curve costs about 40 ms, and where it says a curve reaches a given state the
-simulator agrees several times more often than for the planner's own curves. :class:`DragPool` holds a
+where a simulated curve costs about 40 ms, and curves it predicts to make a plan step from 3 crossings
+made it several times as often as the planner's own (DESIGN 8). :class:`DragPool` holds a
 node's pool of random curves with their predicted states, so that those predicted to make a given step
 can be picked out (``bench/drag_steps.py``). Used by the planner, to simulate such curves first, it
 solved no more tuning goals and was not kept (DESIGN 8; log, 2026-12-05).
