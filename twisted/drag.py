@@ -29,7 +29,7 @@ import numpy.typing as npt
 from twisted.rope import LINK_SPACING_M, N_LINKS
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve
 from twisted.sim.rope import MIN_LIFT_M
-from twisted.topology import PData, cross2, p_data_of, projected_crossings, segment_hits
+from twisted.topology import PData, crossing_signs, p_data_of, projected_crossings, segment_hits
 
 __all__ = ["DragPool", "crossing_counts", "drag", "predicted_states"]
 
@@ -100,10 +100,7 @@ def _state(xy: FloatArray, high: FloatArray, old: dict[tuple[int, int], bool]) -
         )
         over[c] = kept if kept is not None else max(high[i], high[i + 1]) >= max(high[j], high[j + 1])
     d = xy[1:] - xy[:-1]
-    d_over = np.where(over[:, None], d[pc.i], d[pc.j])
-    d_under = np.where(over[:, None], d[pc.j], d[pc.i])
-    sign = np.where(cross2(d_over, d_under) > 0, 1, -1).astype(np.int64)
-    return p_data_of(replace(pc, i_over=over, sign=sign))
+    return p_data_of(replace(pc, i_over=over, sign=crossing_signs(d[pc.i], d[pc.j], over)))
 
 
 def predicted_states(points: npt.ArrayLike, curves: npt.ArrayLike) -> list[PData]:
@@ -143,5 +140,4 @@ class DragPool:
         return out
 
     def curve(self, m: int) -> Curve:
-        link, z, x, y = self.curves[m]
-        return Curve(int(link), float(z), float(x), float(y))
+        return Curve.from_array(self.curves[m])

@@ -29,6 +29,7 @@ __all__ = [
     "Visit",
     "cross",
     "cross2",
+    "crossing_signs",
     "json_int",
     "mirror",
     "p_data_of",
@@ -286,6 +287,14 @@ def segment_hits(
     return ok & (t >= 0) & (t < 1) & (u >= 0) & (u < 1), t, u
 
 
+def crossing_signs(d_i: FloatArray, d_j: FloatArray, i_over: npt.NDArray[np.bool_]) -> IntArray:
+    """The sign of each crossing of strands with 2-D directions ``d_i`` and ``d_j`` (walking order),
+    strand ``i`` over where ``i_over``: ``sign((d_over x d_under) . e_z)`` (docs/DESIGN.md section 4.3)."""
+    d_over = np.where(i_over[:, None], d_i, d_j)
+    d_under = np.where(i_over[:, None], d_j, d_i)
+    return np.where(cross2(d_over, d_under) > 0, 1, -1).astype(np.int64)
+
+
 def projected_crossings(
     points: npt.ArrayLike, *, closed: bool = False, ties: TieRule = "earlier_over"
 ) -> ProjectedCrossings:
@@ -330,9 +339,7 @@ def projected_crossings(
     if ties == "raise" and np.any(zi == zj):
         raise ValueError("two strands cross at equal heights in the projection; perturb the polygon")
     i_over = zi >= zj
-    d_over = np.where(i_over[:, None], d[i_idx, :2], d[j_idx, :2])
-    d_under = np.where(i_over[:, None], d[j_idx, :2], d[i_idx, :2])
-    sign = np.where(cross2(d_over, d_under) > 0, 1, -1).astype(np.int64)
+    sign = crossing_signs(d[i_idx, :2], d[j_idx, :2], i_over)
     k = len(i_idx)
     order = np.argsort(np.concatenate([i_idx + t, j_idx + u]), kind="stable")
     position = np.empty(2 * k, dtype=np.int64)
