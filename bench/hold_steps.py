@@ -40,9 +40,10 @@ class HoldingSim(RopeSim):
 
     def __init__(self) -> None:
         super().__init__()
+        solref = " ".join(f"{v:g}" for v in self.params.weld_solref)  # as stiff as the grasp
         welds = "".join(
             f'<weld name="hold_{i}" body1="holder" body2="{link_name(i)}" active="false" '
-            f'relpose="0 0 0 1 0 0 0" solref="0.02 1"/>'
+            f'relpose="0 0 0 1 0 0 0" solref="{solref}"/>'
             for i in range(N_LINKS)
         )
         xml = rope_xml(self.params)
