@@ -167,9 +167,9 @@ def cross_reach(
 ) -> float:
     """How far the tip of ``move``'s end segment has to travel, in lengths of that end's free piece: the
     distance on the table from the tip to the nearest point of the crossed segment that a straight carry
-    crosses with the move's sign, over the length of rope from the tip to its first crossing. Past 1 a
-    carry of the tip drags rope through the knot behind it; ``inf`` where no point fits (``cross_fit`` 0).
-    Read by ``bench/cross_fit.py``."""
+    crosses with the move's sign, over the length of rope from the tip to its first crossing. A carried
+    tip ends at most that length from its first crossing unless it pulls rope through it: past 2 it must,
+    past 1 it may. ``inf`` where no point fits (``cross_fit`` 0). Read by ``bench/cross_fit.py``."""
     pts = np.asarray(points, dtype=np.float64)
     bounds = segment_bounds(pts) if bounds is None else bounds
     aim = _cross_aim(pts, move, bounds)
