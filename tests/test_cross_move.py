@@ -139,7 +139,7 @@ def test_the_reach_of_a_cross_move_is_the_tips_distance_in_free_pieces() -> None
         if reach == float("inf"):
             continue
         tip = points[0] if move.segment == 0 else points[-1]
-        free = (bounds[1] if move.segment == 0 else bounds[-1] - bounds[-2]) * LINK_SPACING_M
+        free = (bounds[1] if move.segment == 0 else len(points) - 1 - bounds[-2]) * LINK_SPACING_M
         lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
         nearest = min(float(np.hypot(*(_at(points, s)[:2] - tip[:2]))) for s in np.linspace(lo, hi, 200))
         assert nearest / free <= reach + 1e-9  # the fitting points are some of the segment's points

@@ -175,7 +175,7 @@ def cross_reach(
     aim = _cross_aim(pts, move, bounds)
     if not aim.fits.any():
         return float("inf")
-    free = bounds[1] if aim.head else bounds[-1] - bounds[-2]  # rope parameter: links from the tip
+    free = bounds[move.segment + 1] - bounds[move.segment]  # the end segment's length in links
     return float(aim.dist[aim.fits].min() / (free * LINK_SPACING_M))
 
 
