@@ -157,7 +157,11 @@ def problems_export(
     ctx: typer.Context,
     set_name: Annotated[str, typer.Argument(help="A stored problem set.")],
     out: Annotated[Path, typer.Option("--out", help="The goal-set file to write (JSON).")],
-    kind: str = typer.Option("imported", "--kind", help="How it was drawn: u4, u5, u6, catalogue, ..."),
+    kind: str | None = typer.Option(
+        None,
+        "--kind",
+        help="How it was drawn: u4, u5, u6, catalogue, ... (default: as stored, else imported).",
+    ),
     command: str | None = typer.Option(None, "--command", help="The command that drew it (default: stored)."),
 ) -> None:
     """Write a stored set as a goal-set file (name, kind, seed, command, goals) for `problems import`."""
@@ -165,7 +169,7 @@ def problems_export(
     from twisted.runtime import name_problem
     from twisted.store.experiments import ProblemSet, load_problem_set
 
-    problem = name_problem(kind)
+    problem = name_problem(kind) if kind is not None else None
     if problem is not None:
         fail(f"--kind {kind!r} {problem}")
     if out.suffix != ".json":
@@ -180,9 +184,12 @@ def problems_export(
         row = session.get(ProblemSet, record.id)
         assert row is not None
         seed, parameters = row.seed, dict(row.parameters or {})
-        drawn_by = command or parameters.get("command") or _make_command(record.name, seed, parameters)
+        stored_command = parameters.pop("command", None)  # an imported set's, from its file
+        parameters.pop("goals", None)  # the file lists them
+        drawn_by = command or stored_command or _make_command(record.name, seed, parameters)
         if drawn_by is None:
             fail(f"the set {set_name!r} does not say how it was drawn: give --command")
+    kind = kind or str(parameters.get("kind", "imported"))
     out.write_text(goal_set_file(record, kind=kind, seed=seed, command=drawn_by, parameters=parameters))
     console.print(f"wrote {out} ({len(record.problems)} goals, seed {seed})")
 

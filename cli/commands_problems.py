@@ -86,17 +86,17 @@ def problems_import(
 ) -> None:
     """Import goal sets from a JSON file (every state is checked; nothing is stored on an error)."""
     from twisted.experiments import EvalInputError, import_problem_sets
-    from twisted.experiments.problems import decode_goal_file
+    from twisted.experiments.problems import decode_goal_file, read_goal_file
 
     try:
-        text = decode_goal_file(file.read_bytes())
+        read = read_goal_file(decode_goal_file(file.read_bytes()), name)  # all checked before the store opens
     except OSError as exc:
         fail(f"cannot read goal file {str(file)!r}: {exc.strerror}")
     except EvalInputError as exc:
         fail(f"{file}: {exc}")
     with open_db(ctx) as store:
         try:
-            records = import_problem_sets(store, text, name)
+            records = import_problem_sets(store, read)
         except EvalInputError as exc:
             fail(f"{file}: {exc}")
     _print_sets(records)

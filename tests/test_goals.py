@@ -361,6 +361,87 @@ def test_goal_set_files_are_imported_with_their_seed(sqlite_url: str, tmp_path: 
         assert row is not None and row.seed == 5 and row.parameters["kind"] == "u4"
 
 
+def test_an_imported_goal_set_file_exports_as_the_same_file(sqlite_url: str, tmp_path: Path) -> None:
+    """Import keeps what the file says about the draw as a made set's parameters (the catalogue's pull
+    test among them), so export writes the file back unchanged, round after round."""
+    from twisted.experiments.runner import _pull_test_required
+    from twisted.store.experiments import ProblemSet
+
+    source = Path(__file__).parent.parent / "goalsets" / "catalogue.json"
+    code, out = _cli(sqlite_url, "problems", "import", str(source))
+    assert code == 0, out
+    again = tmp_path / "catalogue.json"
+    code, out = _cli(sqlite_url, "problems", "export", "catalogue", "--out", str(again))
+    assert code == 0, out
+    assert again.read_text() == source.read_text()
+    with open_store(sqlite_url) as store, store.session() as session:
+        row = session.scalar(select(ProblemSet).where(ProblemSet.name == "catalogue"))
+        assert row is not None and _pull_test_required(row.parameters)
+        assert row.parameters["command"] == "twisted problems make --set catalogue"
+        assert "format" not in row.parameters and "parameters" not in row.parameters
+
+
+def test_a_goal_set_file_with_parameters_that_are_not_an_object_is_refused(
+    sqlite_url: str, tmp_path: Path
+) -> None:
+    data = json.loads((Path(__file__).parent.parent / "goalsets" / "tune-u4.json").read_text())
+    data["parameters"] = [data["parameters"]]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    code, out = _cli(sqlite_url, "problems", "import", str(bad))
+    assert code == 2 and "parameters must be an object" in out
+    assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
+
+
+def test_0015_flattens_the_parameters_of_sets_imported_before(db_url: str) -> None:
+    """A set imported before 0015 kept the file's whole header; the upgrade stores it as import does now,
+    the downgrade nests it again."""
+    from alembic import command
+    from sqlalchemy import create_engine, text
+
+    from twisted.store import alembic_config
+
+    header = {
+        "format": "twisted-goal-set/1",
+        "name": "catalogue",
+        "kind": "catalogue",
+        "seed": 0,
+        "command": "twisted problems make --set catalogue",
+        "parameters": {"kind": "catalogue", "knots": ["3_1+"], "tighten": True, "pull_test": "required"},
+        "goals": 1,
+    }
+    insert = text(
+        "INSERT INTO problem_sets (id, name, source, seed, parameters, created_at) "
+        "VALUES (:id, :name, :source, 0, :parameters, '2026-01-01 00:00:00')"
+    )
+    engine = create_engine(db_url)
+    with engine.begin() as conn:
+        command.upgrade(alembic_config(conn), "0005")
+        conn.execute(
+            insert, {"id": 1, "name": "catalogue", "source": "imported", "parameters": json.dumps(header)}
+        )
+        conn.execute(
+            insert, {"id": 2, "name": "u4", "source": "made", "parameters": json.dumps({"kind": "u4"})}
+        )
+        conn.execute(
+            insert, {"id": 3, "name": "plain", "source": "imported", "parameters": json.dumps({"goals": 2})}
+        )
+    read = text("SELECT parameters FROM problem_sets ORDER BY id")
+
+    def stored() -> list[dict[str, object]]:
+        with engine.connect() as conn:
+            return [p if isinstance(p, dict) else json.loads(p) for (p,) in conn.execute(read)]
+
+    with engine.begin() as conn:
+        command.upgrade(alembic_config(conn), "0015")
+    flat = {**header["parameters"], "command": header["command"], "goals": 1}
+    assert stored() == [flat, {"kind": "u4"}, {"goals": 2}]
+    with engine.begin() as conn:
+        command.downgrade(alembic_config(conn), "0005")
+    assert stored() == [header, {"kind": "u4"}, {"goals": 2}]
+    engine.dispose()
+
+
 def test_the_committed_goal_sets_import() -> None:
     from twisted.experiments.problems import goal_file_header
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -62,6 +63,7 @@ __all__ = [
     "FOUR_SET",
     "UNSEEN_SET",
     "EvalInputError",
+    "GoalFile",
     "decode_goal_file",
     "goal_problems",
     "import_problem_sets",
@@ -69,6 +71,7 @@ __all__ = [
     "make_problem_sets_in_store",
     "parse_goal_file",
     "rank_by_frequency",
+    "read_goal_file",
     "save_goal_sets",
     "split_thirds",
     "state_frequencies",
@@ -437,13 +440,41 @@ def goal_problems(
     ]
 
 
-def import_problem_sets(store: Any, text: str, name: str | None = None) -> list[ProblemSetRecord]:
-    """Validate a goal file completely, then store all its sets in one transaction (or none).
+@dataclass(frozen=True)
+class GoalFile:
+    """A goal file read and checked (:func:`read_goal_file`), ready to store."""
 
-    A goal-set file (:func:`goal_set_file`) keeps its seed and how it was drawn in the set's row."""
+    goals: dict[str, list[Goal]]
+    seed: int | None
+    parameters: dict[str, Any]
+
+
+def read_goal_file(text: str, name: str | None = None) -> GoalFile:
+    """Check a goal file completely (its goals and, for a goal-set file, its header); nothing is stored.
+
+    A goal-set file (:func:`goal_set_file`) keeps its seed and how it was drawn for the set's row."""
     goals = parse_goal_file(text, name)
     header = goal_file_header(text)
-    return save_goal_sets(store, goals, "imported", seed=header.get("seed"), parameters=header)
+    return GoalFile(goals, header.get("seed"), drawn_parameters(header))
+
+
+def import_problem_sets(store: Any, text: str | GoalFile, name: str | None = None) -> list[ProblemSetRecord]:
+    """Store all the sets of a goal file (its text, or as :func:`read_goal_file` read it) in one
+    transaction, or none."""
+    read = read_goal_file(text, name) if isinstance(text, str) else text
+    return save_goal_sets(store, read.goals, "imported", seed=read.seed, parameters=read.parameters)
+
+
+def drawn_parameters(header: Mapping[str, Any]) -> dict[str, Any]:
+    """How a goal-set file's sets were drawn, stored as a made set's parameters are: the file's
+    ``parameters`` with its ``kind`` and the ``command`` that drew it (``problems export`` writes the
+    file back from them: the same header). The file's format and name are not kept, its seed has a
+    column of its own."""
+    drawn = dict(header.get("parameters") or {})
+    for key in ("kind", "command"):
+        if header.get(key) is not None:
+            drawn.setdefault(key, header[key])
+    return drawn
 
 
 def goal_file_header(text: str) -> dict[str, Any]:
@@ -458,6 +489,12 @@ def goal_file_header(text: str) -> dict[str, Any]:
     seed = header.get("seed")
     if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool)):
         raise EvalInputError(f"a {GOAL_SET_FORMAT} file's seed must be an integer, got {seed!r}")
+    parameters = header.get("parameters")
+    if parameters is not None and not isinstance(parameters, dict):
+        raise EvalInputError(f"a {GOAL_SET_FORMAT} file's parameters must be an object, got {parameters!r}")
+    for key in ("kind", "command"):
+        if header.get(key) is not None and not isinstance(header[key], str):
+            raise EvalInputError(f"a {GOAL_SET_FORMAT} file's {key} must be a string, got {header[key]!r}")
     return header
 
 

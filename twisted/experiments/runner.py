@@ -115,12 +115,9 @@ class PreparedEval:
 
 
 def _pull_test_required(parameters: Mapping[str, Any]) -> bool:
-    """Whether a set's parameters (made by ``problems make``, or the header of an imported goal-set file
-    with the drawn set's parameters inside) say its goals count only when the rope pulls tight."""
-    inner = parameters.get("parameters")
-    return parameters.get("pull_test") == "required" or (
-        isinstance(inner, Mapping) and inner.get("pull_test") == "required"
-    )
+    """Whether a set's parameters (made by ``problems make``, or imported from a goal-set file: the same
+    keys, revision 0015) say its goals count only when the rope pulls tight."""
+    return parameters.get("pull_test") == "required"
 
 
 def prepare_eval(store: Any, request: EvalOptions, min_parallel: int = 1) -> PreparedEval:
