@@ -1,11 +1,17 @@
 """Wall time of one curve action on one core, from random reached configurations.
 
     python bench/bench_curve.py --curves 200 [--timestep-s 0.005] [--seed 0]
+    python bench/bench_curve.py --curves 1000 --starts 200 --dense     # the rope's sparse constraint
+                                                                       # Jacobian against a dense one
 
 First a short random walk (not timed) collects reached configurations; then each timed curve
 starts from one of them, drawn at random. Prints the median and p90 wall time per action, the mean
 number of steps, the cost per step and the rejections by reason. The CPU may be shared with other
 processes: compare figures from the same machine and load only.
+
+``--dense`` also applies every curve with MuJoCo's dense constraint Jacobian (``jacobian="dense"``,
+the model's option before 2026-12-05) and prints its CPU time, how many curves ended in the same
+outcome (both rejected, or both in the same P-data) and how far the two end configurations lie apart.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import collections
 import os
 import time
 
+import mujoco
 import numpy as np
 
 from twisted.sim import RopeSim, sample_curve
@@ -41,15 +48,21 @@ def main() -> None:
     parser.add_argument("--timestep-s", type=float, default=DEFAULT_TIMESTEP_S)
     parser.add_argument("--friction-scale", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--dense", action="store_true", help="also with a dense constraint Jacobian")
     args = parser.parse_args()
 
     rng = np.random.default_rng(args.seed)
     sim = RopeSim(args.friction_scale, args.timestep_s)
     starts = reached_configurations(sim, rng, args.starts)
-    wall, cpu, steps = [], [], []
+    dense = RopeSim(args.friction_scale, args.timestep_s) if args.dense else None
+    if dense is not None:
+        dense.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
+    wall, cpu, steps, dense_cpu, apart = [], [], [], [], []
+    same = 0
     rejected: collections.Counter[str] = collections.Counter()
     for _ in range(args.curves):
-        sim.set_state(starts[int(rng.integers(len(starts)))])
+        start = starts[int(rng.integers(len(starts)))]
+        sim.set_state(start)
         curve = sample_curve(rng)
         w0, c0 = time.perf_counter(), time.thread_time()
         outcome = sim.apply(curve)
@@ -58,6 +71,13 @@ def main() -> None:
         steps.append(outcome.steps)
         if not outcome.ok:
             rejected[(outcome.reason or "?").split(" (")[0]] += 1
+        if dense is not None:
+            dense.set_state(start)
+            c0 = time.thread_time()
+            other = dense.apply(curve)
+            dense_cpu.append(time.thread_time() - c0)
+            same += outcome.ok == other.ok and (not outcome.ok or sim.p_data() == dense.p_data())
+            apart.append(float(np.abs(sim.state() - dense.state()).max()))
     w, c = np.array(wall), np.array(cpu)
     print(
         f"curve action, dt = {args.timestep_s * 1000:g} ms, {args.curves} curves from {args.starts} "
@@ -77,6 +97,13 @@ def main() -> None:
         f"  rejected: {sum(rejected.values())} of {args.curves}"
         + "".join(f"\n    {n:4d}  {reason}" for reason, n in rejected.most_common())
     )
+    if dense is not None:
+        d, gap = np.array(dense_cpu), np.array(apart)
+        print(
+            f"  dense Jacobian: cpu per action median {np.median(d):.4f} s, mean {d.mean():.4f} s "
+            f"({d.sum() / c.sum():.2f}x the sparse one's); the same outcome in {same} of {args.curves}; "
+            f"end configurations apart by median {np.median(gap):.1e}, max {gap.max():.1e} (qpos, qvel)"
+        )
 
 
 if __name__ == "__main__":

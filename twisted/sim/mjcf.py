@@ -128,7 +128,8 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
     )
     return f"""<mujoco model="twisted_rope">
   <compiler angle="degree"/>
-  <option timestep="{params.timestep_s:.10g}" integrator="implicitfast" solver="Newton" cone="pyramidal"/>
+  <option timestep="{params.timestep_s:.10g}" integrator="implicitfast" solver="Newton" cone="pyramidal"
+          jacobian="sparse"/>
   <default>
     <geom friction="{mu}" condim="3" solref="{_fmt(*params.contact_solref)}"
           solimp="{_fmt(*params.contact_solimp)}"/>
