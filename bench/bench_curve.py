@@ -3,11 +3,16 @@
     python bench/bench_curve.py --curves 200 [--timestep-s 0.005] [--seed 0]
     python bench/bench_curve.py --curves 1000 --starts 200 --dense     # the rope's sparse constraint
                                                                        # Jacobian against a dense one
+    python bench/bench_curve.py --curves 1000 --db sqlite:///tune.db --dense   # the planner's curves
 
 First a short random walk (not timed) collects reached configurations; then each timed curve
 starts from one of them, drawn at random. Prints the median and p90 wall time per action, the mean
 number of steps, the cost per step and the rejections by reason. The CPU may be shared with other
 processes: compare figures from the same machine and load only.
+
+``--db URL`` takes the curves of stored search trees instead (``twisted plan`` / ``eval`` runs): each
+timed curve is the curve of a tree edge, drawn at random, from its parent's configuration, so the
+starts are the planner's (knotted ropes, fewer links on the table) and so are the curves.
 
 ``--dense`` also applies every curve with MuJoCo's dense constraint Jacobian (``jacobian="dense"``,
 the model's option before 2026-12-05) and prints its CPU time, how many curves ended in the same
@@ -24,7 +29,7 @@ import time
 import mujoco
 import numpy as np
 
-from twisted.sim import RopeSim, sample_curve
+from twisted.sim import Curve, RopeSim, sample_curve
 from twisted.sim.rope import DEFAULT_TIMESTEP_S
 
 
@@ -39,6 +44,31 @@ def reached_configurations(sim: RopeSim, rng: np.random.Generator, n: int) -> li
     return reached
 
 
+def tree_edges(url: str, rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, Curve]]:
+    """``n`` (parent configuration, curve) pairs drawn from the curve edges of the stored search trees."""
+    from sqlalchemy import select
+    from sqlalchemy.orm import aliased
+
+    from twisted.store import blob_to_array, open_store
+    from twisted.store.search import SearchNode
+
+    parent = aliased(SearchNode)
+    query = (
+        select(parent.q, SearchNode.link, SearchNode.z_max_m, SearchNode.x_m, SearchNode.y_m)
+        .join(parent, SearchNode.parent_id == parent.id)
+        .where(SearchNode.link.is_not(None))
+    )
+    with open_store(url, readonly=True) as store, store.session() as session:
+        rows = session.execute(query).all()
+    if len(rows) < n:
+        raise SystemExit(f"{url}: {len(rows)} tree edges with a curve, fewer than --curves {n}")
+    picked = rng.choice(len(rows), size=n, replace=False)
+    return [
+        (blob_to_array(rows[i].q), Curve(rows[i].link, rows[i].z_max_m, rows[i].x_m, rows[i].y_m))
+        for i in picked
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -49,21 +79,25 @@ def main() -> None:
     parser.add_argument("--friction-scale", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dense", action="store_true", help="also with a dense constraint Jacobian")
+    parser.add_argument("--db", help="draw (start, curve) pairs from the edges of this store's search trees")
     args = parser.parse_args()
 
     rng = np.random.default_rng(args.seed)
     sim = RopeSim(args.friction_scale, args.timestep_s)
-    starts = reached_configurations(sim, rng, args.starts)
+    jobs = tree_edges(args.db, rng, args.curves) if args.db else None
+    starts = reached_configurations(sim, rng, args.starts) if jobs is None else []
     dense = RopeSim(args.friction_scale, args.timestep_s) if args.dense else None
     if dense is not None:
         dense.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
     wall, cpu, steps, dense_cpu, apart = [], [], [], [], []
     same = 0
     rejected: collections.Counter[str] = collections.Counter()
-    for _ in range(args.curves):
-        start = starts[int(rng.integers(len(starts)))]
+    for i in range(args.curves):
+        if jobs is None:
+            start, curve = starts[int(rng.integers(len(starts)))], sample_curve(rng)
+        else:
+            start, curve = jobs[i]
         sim.set_state(start)
-        curve = sample_curve(rng)
         w0, c0 = time.perf_counter(), time.thread_time()
         outcome = sim.apply(curve)
         cpu.append(time.thread_time() - c0)
@@ -80,8 +114,9 @@ def main() -> None:
             apart.append(float(np.abs(sim.state() - dense.state()).max()))
     w, c = np.array(wall), np.array(cpu)
     print(
-        f"curve action, dt = {args.timestep_s * 1000:g} ms, {args.curves} curves from {args.starts} "
-        f"reached configurations, seed {args.seed}, load average {os.getloadavg()[0]:.2f} "
+        f"curve action, dt = {args.timestep_s * 1000:g} ms, {args.curves} curves from "
+        + (f"{args.starts} reached configurations" if jobs is None else f"the search trees of {args.db}")
+        + f", seed {args.seed}, load average {os.getloadavg()[0]:.2f} "
         f"on {os.cpu_count()} cores"
     )
     for name, t in (("wall", w), ("cpu ", c)):
