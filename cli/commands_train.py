@@ -168,7 +168,8 @@ def train_command(
         init_model_id=init_model,
         removing=removing,
     )
-    store = open_db(ctx, create=False)  # training needs collected data: a new database has none
+    # training needs collected data: a new database has none
+    store = ctx.with_resource(open_db(ctx, create=False))
     _train(store, config, resume, device, threads)
 
 
@@ -316,7 +317,8 @@ def models_command(
         return
     if name is not None:
         fail("--name names an imported model: give --import FILE too")
-    store = open_db(ctx, readonly=True, needed_by=None if model_id is None else f"--id {model_id}")
+    needed_by = None if model_id is None else f"--id {model_id}"
+    store = ctx.with_resource(open_db(ctx, readonly=True, needed_by=needed_by))
     if export is not None:
         try:
             model = load_model(store, model_id)
@@ -389,7 +391,7 @@ def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: in
     broken = model.unusable()  # checked as a trained model is, before the store is opened
     if broken:
         fail(f"--import {path}: this model cannot plan: {broken}")
-    store = open_db(ctx)
+    store = ctx.with_resource(open_db(ctx))
     new_id = save_model(store, model, name=label)
     console.print(
         f"model {new_id} ({label}, trained on {model.metadata.get('data_size', '?')} samples) stored from "

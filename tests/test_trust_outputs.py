@@ -40,6 +40,7 @@ def store_with_model(tmp_path: Path) -> Path:
     db = tmp_path / "twisted.db"
     result = runner.invoke(app, ["--db", f"sqlite:///{db}", "models", "--import", str(default_model_path())])
     assert result.exit_code == 0, result.output
+    assert not Path(f"{db}-wal").exists()  # the command closed the store (no connection left to the GC)
     return db
 
 
