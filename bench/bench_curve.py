@@ -1,4 +1,4 @@
-"""Wall time of one curve action on one core, from random reached configurations.
+"""Wall time of one curve action on one core, from reached configurations (a random walk's, or the planner's).
 
     python bench/bench_curve.py --curves 200 [--timestep-s 0.005] [--seed 0]
     python bench/bench_curve.py --curves 1000 --starts 200 --dense     # the rope's sparse constraint
