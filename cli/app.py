@@ -413,9 +413,12 @@ def open_db(
                 f"--db {shorten(url)}: an in-memory SQLite database keeps nothing (and worker processes "
                 "cannot share it); give a file, e.g. sqlite:///twisted.db"
             )
-        return open_store(url, create=create and needed_by is None, readonly=readonly, verify=not readonly)
+        store = open_store(url, create=create and needed_by is None, readonly=readonly, verify=not readonly)
     except StoreError as exc:
         fail(f"{needed_by}: {exc}" if needed_by else str(exc))
+    # closed with the command at the latest (a `with` block closes it sooner): a connection left to the
+    # garbage collector would checkpoint an SQLite WAL into the file whenever it runs
+    return ctx.with_resource(store)
 
 
 def store_exists(ctx: typer.Context) -> bool:

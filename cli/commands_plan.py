@@ -564,8 +564,7 @@ def replay_command(
     """Re-simulate a run's plan from its initial configuration; exit 0 if it still ends in the goal."""
     from twisted.planner import PlanInputError, replay
 
-    # --tighten stores a pull test; the store closes with the command
-    store = ctx.with_resource(open_db(ctx, readonly=not tighten, needed_by=f"RUN_ID {run_id}"))
+    store = open_db(ctx, readonly=not tighten, needed_by=f"RUN_ID {run_id}")  # --tighten stores a pull test
     try:
         result = replay(store, run_id, tighten=tighten)
     except PlanInputError as exc:

@@ -120,7 +120,7 @@ def train_command(
         except GoalError as exc:
             fail(str(exc))
     needs = f"--resume {resume}" if resume is not None else problem_set and f"--problem-set {problem_set}"
-    store = ctx.with_resource(open_db(ctx, needed_by=needs or None))
+    store = open_db(ctx, needed_by=needs or None)
     columns = (
         TextColumn("[bold]run {task.fields[run]}"),
         BarColumn(),
@@ -168,7 +168,7 @@ def list_command(ctx: typer.Context, as_json: bool = json_option("the runs and t
 
     from twisted.store.rl import RlRun, list_checkpoints
 
-    store = ctx.with_resource(open_db(ctx, readonly=True))
+    store = open_db(ctx, readonly=True)
     with store.session() as session:
         runs = session.scalars(select(RlRun).order_by(RlRun.id)).all()
         checkpoints = list_checkpoints(session)

@@ -168,8 +168,7 @@ def train_command(
         init_model_id=init_model,
         removing=removing,
     )
-    # training needs collected data: a new database has none
-    store = ctx.with_resource(open_db(ctx, create=False))
+    store = open_db(ctx, create=False)  # training needs collected data: a new database has none
     _train(store, config, resume, device, threads)
 
 
@@ -317,8 +316,7 @@ def models_command(
         return
     if name is not None:
         fail("--name names an imported model: give --import FILE too")
-    needed_by = None if model_id is None else f"--id {model_id}"
-    store = ctx.with_resource(open_db(ctx, readonly=True, needed_by=needed_by))
+    store = open_db(ctx, readonly=True, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
         try:
             model = load_model(store, model_id)
@@ -391,7 +389,7 @@ def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: in
     broken = model.unusable()  # checked as a trained model is, before the store is opened
     if broken:
         fail(f"--import {path}: this model cannot plan: {broken}")
-    store = ctx.with_resource(open_db(ctx))
+    store = open_db(ctx)
     new_id = save_model(store, model, name=label)
     console.print(
         f"model {new_id} ({label}, trained on {model.metadata.get('data_size', '?')} samples) stored from "
