@@ -1,0 +1,82 @@
+"""Which states the rope reaches: the distinct states in stored search trees, by crossings and curls,
+against every state there is.
+
+    python bench/realized_states.py --db sqlite:///tune.db [--set tune-u5] [--label L] [--max-cross 5]
+
+A search keeps every result with no fewer crossings than its parent and no more than its goal (DESIGN 8),
+so its tree holds the states its curves happened to make on the way, most of them no step of a plan
+asked for. Over the finished evaluation runs toward ``--set`` under ``--label`` (all when not given),
+this prints per crossing count and number of curls (crossings whose two visits are neighbours along
+the rope: ``bench/bottleneck.py``'s ``curl_segments``) how many distinct states the trees hold, how many
+states ``twisted.moves.enumerate_states`` finds (the uniform goal sets are drawn from these; 5 crossings
+take about half a minute), and the share; then per goal curl count the runs and the solved runs. Where
+the share falls with every curl, the rope makes states with many curls seldom, whatever the search
+asks for.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+
+from bottleneck import curl_segments  # bench/ is this script's folder
+from sqlalchemy import select
+
+from twisted.moves import enumerate_states
+from twisted.store import open_store
+from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
+from twisted.store.search import load_run
+from twisted.topology import PData
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--db", required=True, help="store with evaluation results")
+    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
+    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    ap.add_argument("--max-cross", type=int, default=5, help="enumerate the states up to this many crossings")
+    args = ap.parse_args()
+    if not 1 <= args.max_cross <= 5:
+        ap.error("--max-cross must lie in [1, 5] (6 crossings do not fit in memory)")
+
+    realized: set[PData] = set()
+    goals: Counter[tuple[int, str]] = Counter()
+    with open_store(args.db) as store:
+        with store.session() as session:
+            q = (
+                select(EvalResult.plan_run_id)
+                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
+                .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
+                .order_by(EvalResult.plan_run_id)
+            )
+            if args.sets:
+                q = q.where(ProblemSet.name.in_(args.sets))
+            if args.labels:
+                q = q.where(EvalResult.planner.in_(args.labels))
+            run_ids = list(session.scalars(q))
+        for run_id in run_ids:
+            info = load_run(store, run_id)
+            if info is None:
+                continue
+            realized.update(node.p_data for node in info.nodes)
+            curls = len(curl_segments(info.goal.representative))
+            goals[(curls, "runs")] += 1
+            goals[(curls, "solved")] += info.outcome == "solved"
+    print(f"{len(run_ids)} runs, {len(realized):,} distinct states in their trees")
+    print("| crossings | curls | states | in the trees | share |")
+    print("| --- | --- | --- | --- | --- |")
+    every = enumerate_states(args.max_cross)
+    for cross in range(1, args.max_cross + 1):
+        there = Counter(len(curl_segments(p)) for p in every[cross])
+        made = Counter(len(curl_segments(p)) for p in realized if p.cross == cross)
+        for curls in sorted(there):
+            share = made[curls] / there[curls]
+            print(f"| {cross} | {curls} | {there[curls]:,} | {made[curls]:,} | {share:.2%} |")
+    print("\n| goal's curls | runs | solved |")
+    print("| --- | --- | --- |")
+    for curls in sorted({c for c, _ in goals}):
+        print(f"| {curls} | {goals[(curls, 'runs')]} | {goals[(curls, 'solved')]} |")
+
+
+if __name__ == "__main__":
+    main()
