@@ -21,12 +21,11 @@ from __future__ import annotations
 import argparse
 from collections import Counter
 
-from sqlalchemy import select
+from step_moves import finished_runs  # bench/ is this script's folder
 
 from twisted.diagram import diagram
 from twisted.moves import enumerate_states, sub_states
 from twisted.store import open_store
-from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import load_run
 from twisted.topology import PData, PDataError, Visit
 
@@ -90,18 +89,7 @@ def main() -> None:
     changed: Counter[int] = Counter()
     r3: Counter[int] = Counter()
     with open_store(args.db) as store:
-        with store.session() as session:
-            q = (
-                select(EvalResult.plan_run_id)
-                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
-                .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
-                .order_by(EvalResult.plan_run_id)
-            )
-            if args.sets:
-                q = q.where(ProblemSet.name.in_(args.sets))
-            if args.labels:
-                q = q.where(EvalResult.planner.in_(args.labels))
-            run_ids = list(session.scalars(q))
+        run_ids = [run_id for run_id, _ in finished_runs(store, args.sets, args.labels)]
         print("| run | outcome | goal's R3 (held) | sub-states one short (held) | their other R3 (held) |")
         print("| --- | --- | --- | --- | --- |")
         for run_id in run_ids:

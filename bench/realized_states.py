@@ -20,11 +20,10 @@ import argparse
 from collections import Counter
 
 from bottleneck import curl_segments  # bench/ is this script's folder
-from sqlalchemy import select
+from step_moves import finished_runs
 
 from twisted.moves import enumerate_states
 from twisted.store import open_store
-from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import load_run
 from twisted.topology import PData
 
@@ -42,18 +41,7 @@ def main() -> None:
     realized: set[PData] = set()
     goals: Counter[tuple[int, str]] = Counter()
     with open_store(args.db) as store:
-        with store.session() as session:
-            q = (
-                select(EvalResult.plan_run_id)
-                .join(ProblemSet, ProblemSet.id == EvalResult.set_id)
-                .where(EvalResult.status.in_(FINISHED_STATUSES), EvalResult.plan_run_id.is_not(None))
-                .order_by(EvalResult.plan_run_id)
-            )
-            if args.sets:
-                q = q.where(ProblemSet.name.in_(args.sets))
-            if args.labels:
-                q = q.where(EvalResult.planner.in_(args.labels))
-            run_ids = list(session.scalars(q))
+        run_ids = [run_id for run_id, _ in finished_runs(store, args.sets, args.labels)]
         for run_id in run_ids:
             info = load_run(store, run_id)
             if info is None:

@@ -40,13 +40,11 @@ def move_class(move: Move, p_data: PData) -> str:
     return "R2"
 
 
-def stored_pairs(
+def finished_runs(
     store: Any, sets: Sequence[str] | None, labels: Sequence[str] | None
-) -> Iterator[tuple[int, str, StoredNode, PData, Move | None, float, float]]:
-    """Every (node, requested next state) pair of the finished evaluation runs toward ``sets`` under
-    ``labels`` (all when None or empty), from the runs' ``pair`` statistics: run id, goal key, the node,
-    the next state, the move that explains the step (None when no one move does), steps tried and
-    reached. Runs made before the pair statistics were kept are skipped."""
+) -> list[tuple[int, str]]:
+    """(plan run id, goal key) of the finished evaluation results toward ``sets`` under ``labels`` (all when
+    None or empty), in run order."""
     with store.session() as session:
         q = (
             select(EvalResult.plan_run_id, EvalResult.goal_key)
@@ -58,8 +56,17 @@ def stored_pairs(
             q = q.where(ProblemSet.name.in_(sets))
         if labels:
             q = q.where(EvalResult.planner.in_(labels))
-        rows = session.execute(q).all()
-    for run_id, goal_key in rows:
+        return [(int(run_id), str(goal_key)) for run_id, goal_key in session.execute(q).all()]
+
+
+def stored_pairs(
+    store: Any, sets: Sequence[str] | None, labels: Sequence[str] | None
+) -> Iterator[tuple[int, str, StoredNode, PData, Move | None, float, float]]:
+    """Every (node, requested next state) pair of the finished evaluation runs toward ``sets`` under
+    ``labels`` (all when None or empty), from the runs' ``pair`` statistics: run id, goal key, the node,
+    the next state, the move that explains the step (None when no one move does), steps tried and
+    reached. Runs made before the pair statistics were kept are skipped."""
+    for run_id, goal_key in finished_runs(store, sets, labels):
         info = load_run(store, run_id)
         if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
             continue  # a run made before the pair statistics were kept
