@@ -9,9 +9,9 @@ asked for. Over the finished evaluation runs toward ``--set`` under ``--label`` 
 this prints per crossing count and number of curls (crossings whose two visits are neighbours along
 the rope: ``bench/bottleneck.py``'s ``curl_segments``) how many distinct states the trees hold, how many
 states ``twisted.moves.enumerate_states`` finds (the uniform goal sets are drawn from these; 5 crossings
-take about half a minute), and the share; then per goal curl count the runs and the solved runs. Where
-the share falls with every curl, the rope makes states with many curls seldom, whatever the search
-asks for.
+take about half a minute), and the share; then per goal curl count the runs and the solved runs, and
+the last step of each answer (the crossings it started from, and its move). Where the share falls with
+every curl, the rope makes states with many curls seldom, whatever the search asks for.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from collections import Counter
 from bottleneck import curl_segments  # bench/ is this script's folder
 from step_moves import finished_runs
 
-from twisted.moves import enumerate_states
+from twisted.moves import enumerate_states, explains
 from twisted.store import open_store
 from twisted.store.search import load_run
 from twisted.topology import PData
@@ -40,6 +40,7 @@ def main() -> None:
 
     realized: set[PData] = set()
     goals: Counter[tuple[int, str]] = Counter()
+    last: Counter[tuple[int, str]] = Counter()  # the answers' last steps: crossings of the start, move
     with open_store(args.db) as store:
         run_ids = [run_id for run_id, _ in finished_runs(store, args.sets, args.labels)]
         for run_id in run_ids:
@@ -50,6 +51,11 @@ def main() -> None:
             curls = len(curl_segments(info.goal.representative))
             goals[(curls, "runs")] += 1
             goals[(curls, "solved")] += info.outcome == "solved"
+            end = next((node for node in info.nodes if node.id == info.goal_node_id), None)
+            if end is not None and end.parent_seq is not None:
+                parent = next(node for node in info.nodes if node.seq == end.parent_seq)
+                move = explains(parent.p_data, end.p_data)
+                last[(parent.p_data.cross, move.kind if move is not None else "no one move")] += 1
     print(f"{len(run_ids)} runs, {len(realized):,} distinct states in their trees")
     print("| crossings | curls | states | in the trees | share |")
     print("| --- | --- | --- | --- | --- |")
@@ -64,6 +70,10 @@ def main() -> None:
     print("| --- | --- | --- |")
     for curls in sorted({c for c, _ in goals}):
         print(f"| {curls} | {goals[(curls, 'runs')]} | {goals[(curls, 'solved')]} |")
+    print(
+        "\nthe answers' last steps: "
+        + ", ".join(f"{n} from {c} crossings by {k}" for (c, k), n in sorted(last.items()))
+    )
 
 
 if __name__ == "__main__":
