@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 from collections import defaultdict
 
-from step_moves import stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
 
 from twisted.proposals import cross_fit, cross_reach
 from twisted.store import open_store
@@ -38,9 +38,7 @@ def reach_class(reach: float) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True)
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--reach", action="store_true", help="split by over / under and the tip's reach instead")
     args = ap.parse_args()
     store = open_store(args.db)

@@ -24,7 +24,7 @@ from collections import Counter, defaultdict
 from typing import Any
 
 import numpy as np
-from step_moves import move_class, stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, move_class, stored_pairs  # bench/ is this script's folder
 
 from twisted.drag import DragPool, predicted_states
 from twisted.model.registry import load_model
@@ -70,9 +70,7 @@ def edge_accuracy(store: Any, run_ids: list[int]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True)
-    ap.add_argument("--set", action="append", dest="sets", required=True, help="problem set (repeatable)")
-    ap.add_argument("--label", action="append", dest="labels", required=True, help="eval label (repeatable)")
+    add_run_selection(ap, required=True)
     ap.add_argument("--from", type=int, action="append", dest="levels", help="crossings of the steps' start")
     ap.add_argument("--pairs", type=int, default=60, help="pairs drawn per level")
     ap.add_argument("--pool", type=int, default=1000, help="random curves per node looked through")

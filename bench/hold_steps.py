@@ -22,7 +22,7 @@ from collections import Counter, defaultdict
 
 import mujoco
 import numpy as np
-from step_moves import stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
 
 from twisted.proposals import cross_move_curve
 from twisted.rope import N_LINKS
@@ -80,9 +80,7 @@ def outcome(sim: RopeSim, ok: bool, start: PData, next_state: PData) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True)
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--from", type=int, dest="cross", required=True, help="steps from states of N crossings")
     ap.add_argument("--pairs", type=int, default=25)
     ap.add_argument("--curves", type=int, default=4, help="scripted curves per pair")

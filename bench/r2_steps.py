@@ -24,7 +24,7 @@ from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
-from step_moves import stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -124,9 +124,7 @@ def r2_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: R2Move)
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True)
-    ap.add_argument("--set", action="append", dest="sets", required=True, help="problem set (repeatable)")
-    ap.add_argument("--label", action="append", dest="labels", required=True, help="eval label (repeatable)")
+    add_run_selection(ap, required=True)
     ap.add_argument("--from", type=int, action="append", dest="levels", help="crossings of the steps' start")
     ap.add_argument("--pairs", type=int, default=60, help="pairs drawn per crossing count")
     ap.add_argument("--k", type=int, default=6, help="curves simulated per pair and proposer")

@@ -20,8 +20,9 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from functools import cache
 
-from step_moves import finished_runs  # bench/ is this script's folder
+from step_moves import add_run_selection, finished_runs  # bench/ is this script's folder
 
 from twisted.diagram import diagram
 from twisted.moves import enumerate_states, sub_states
@@ -30,12 +31,13 @@ from twisted.store.search import load_run
 from twisted.topology import PData, PDataError, Visit
 
 
-def r3_states(p: PData) -> list[PData]:
+@cache  # asked again for the same states: each R3's inverse, every child's parent
+def r3_states(p: PData) -> tuple[PData, ...]:
     """The states one R3 move from ``p`` (none when ``p`` cannot be drawn)."""
     try:
         d = diagram(p)
     except PDataError:
-        return []
+        return ()
     last, v = 2 * p.cross, p.visits
     out = []
     for face in d.faces:
@@ -55,7 +57,7 @@ def r3_states(p: PData) -> list[PData]:
             (Visit(swap[x.position], x.over, swap[x.partner], x.sign) for x in v), key=lambda x: x.position
         )
         out.append(PData(tuple(moved)))
-    return out
+    return tuple(out)
 
 
 def check(max_cross: int) -> None:
@@ -64,12 +66,13 @@ def check(max_cross: int) -> None:
         known = set(every[cross])
         moves = with_r3 = 0
         for p in every[cross]:
-            for q in r3_states(p):
+            near = r3_states(p)
+            for q in near:
                 diagram(q)  # raises when the state cannot be drawn
                 if q not in known or p not in r3_states(q):
                     raise AssertionError(f"R3 of {p.key} gave {q.key}: not enumerated, or not undone by R3")
-                moves += 1
-            with_r3 += bool(r3_states(p))
+            moves += len(near)
+            with_r3 += bool(near)
         print(
             f"{cross} crossings: {len(known):,} states, {with_r3:,} with an R3, {moves:,} R3 moves, checked"
         )
@@ -77,9 +80,7 @@ def check(max_cross: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True, help="store with evaluation results")
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--check", type=int, default=4, help="check R3 on every state up to this many crossings")
     args = ap.parse_args()
     if not 0 <= args.check <= 4:

@@ -20,7 +20,7 @@ import argparse
 from collections import Counter
 
 from bottleneck import curl_segments  # bench/ is this script's folder
-from step_moves import finished_runs
+from step_moves import add_run_selection, finished_runs
 
 from twisted.moves import enumerate_states, explains
 from twisted.store import open_store
@@ -30,9 +30,7 @@ from twisted.topology import PData
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True, help="store with evaluation results")
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--max-cross", type=int, default=5, help="enumerate the states up to this many crossings")
     args = ap.parse_args()
     if not 1 <= args.max_cross <= 5:

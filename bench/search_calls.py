@@ -22,6 +22,7 @@ from collections import defaultdict
 from typing import Any
 
 from sqlalchemy import select
+from step_moves import add_run_selection  # bench/ is this script's folder
 
 from twisted.experiments.report import load_results
 from twisted.store import open_store
@@ -38,9 +39,7 @@ def _add(into: dict[str, list[float]], table: dict[str, list[float]]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True, help="store with evaluation results")
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--json", help="write the figures to this file")
     args = ap.parse_args()
 

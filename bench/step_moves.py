@@ -40,6 +40,23 @@ def move_class(move: Move, p_data: PData) -> str:
     return "R2"
 
 
+def add_run_selection(ap: argparse.ArgumentParser, required: bool = False) -> None:
+    """``--db``, and ``--set`` / ``--label`` (repeatable; all when not given, unless ``required``): which
+    evaluation runs a bench reads (:func:`finished_runs`, :func:`stored_pairs`)."""
+    default = "" if required else "; default all"
+    ap.add_argument("--db", required=True, help="store with evaluation results")
+    ap.add_argument(
+        "--set", action="append", dest="sets", required=required, help=f"problem set (repeatable{default})"
+    )
+    ap.add_argument(
+        "--label",
+        action="append",
+        dest="labels",
+        required=required,
+        help=f"result label (repeatable{default})",
+    )
+
+
 def finished_runs(
     store: Any, sets: Sequence[str] | None, labels: Sequence[str] | None
 ) -> list[tuple[int, str]]:
@@ -80,9 +97,7 @@ def stored_pairs(
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--db", required=True, help="store with evaluation results")
-    ap.add_argument("--set", action="append", dest="sets", help="problem set (repeatable; default all)")
-    ap.add_argument("--label", action="append", dest="labels", help="result label (repeatable; default all)")
+    add_run_selection(ap)
     ap.add_argument("--level", type=int, action="append", help="only steps from states of N crossings")
     ap.add_argument("--detail", action="store_true", help="group by the move itself, not its class")
     ap.add_argument("--json", help="write the figures to this file")
