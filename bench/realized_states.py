@@ -12,6 +12,11 @@ states ``twisted.moves.enumerate_states`` finds (the uniform goal sets are drawn
 take about half a minute), and the share; then per goal curl count the runs and the solved runs, and
 the last step of each answer (the crossings it started from, and its move). Where the share falls with
 every curl, the rope makes states with many curls seldom, whatever the search asks for.
+
+Last, per goal (in the order of their first run), the nodes its own trees hold in its sub-states of
+one and two crossings fewer, against those the trees of the other goals' runs hold (and the distinct
+planar sub-states of one fewer): what a search could start from if it began with the configurations
+of earlier searches toward other goals.
 """
 
 from __future__ import annotations
@@ -22,7 +27,8 @@ from collections import Counter
 from bottleneck import curl_segments  # bench/ is this script's folder
 from step_moves import add_run_selection, finished_runs
 
-from twisted.moves import enumerate_states, explains
+from twisted.diagram import drawable
+from twisted.moves import enumerate_states, explains, sub_states
 from twisted.store import open_store
 from twisted.store.search import load_run
 from twisted.topology import PData
@@ -39,6 +45,7 @@ def main() -> None:
     realized: set[PData] = set()
     goals: Counter[tuple[int, str]] = Counter()
     last: Counter[tuple[int, str]] = Counter()  # the answers' last steps: crossings of the start, move
+    held: dict[PData, Counter[PData]] = {}  # per goal: its runs' nodes per state
     with open_store(args.db) as store:
         run_ids = [run_id for run_id, _ in finished_runs(store, args.sets, args.labels)]
         for run_id in run_ids:
@@ -46,6 +53,7 @@ def main() -> None:
             if info is None:
                 continue
             realized.update(node.p_data for node in info.nodes)
+            held.setdefault(info.goal.representative, Counter()).update(node.p_data for node in info.nodes)
             curls = len(curl_segments(info.goal.representative))
             goals[(curls, "runs")] += 1
             goals[(curls, "solved")] += info.outcome == "solved"
@@ -72,6 +80,29 @@ def main() -> None:
         "\nthe answers' last steps: "
         + ", ".join(f"{n} from {c} crossings by {k}" for (c, k), n in sorted(last.items()))
     )
+    print(
+        "\n| goal | curls | own nodes at c-2 / c-1 | other goals' nodes at c-2 / c-1 "
+        "| sub-states at c-1: own / others' / all |"
+    )
+    print("| --- | --- | --- | --- | --- |")
+    for number, goal in enumerate(held):
+        near = (p for p in sub_states(goal) if goal.cross - 2 <= p.cross < goal.cross)
+        subs = {p: p.cross for p in near if drawable(p)}
+        own, others = [0, 0], [0, 0]
+        own_states, other_states = set(), set()
+        for other, counts in held.items():
+            for p, n in counts.items():
+                if p in subs:
+                    level = subs[p] - goal.cross + 2  # 0: two fewer, 1: one fewer
+                    (own if other == goal else others)[level] += n
+                    if level == 1:
+                        (own_states if other == goal else other_states).add(p)
+        n_subs = sum(c == goal.cross - 1 for c in subs.values())
+        print(
+            f"| {number} | {len(curl_segments(goal))} | {own[0]:,} / {own[1]:,} "
+            f"| {others[0]:,} / {others[1]:,} "
+            f"| {len(own_states)} / {len(other_states)} / {n_subs} |"
+        )
 
 
 if __name__ == "__main__":

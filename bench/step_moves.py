@@ -1,6 +1,7 @@
 """Which plan steps succeed: follow_plan steps per crossing level and kind of move, from eval runs.
 
     python bench/step_moves.py --db sqlite:///collect.db --set v26-4 --label z-now [--level 3] [--detail]
+        [--by origin|free]
 
 For every finished evaluation result it reads the plan run's ``pair`` statistics (per node and
 requested next state: the steps tried and those that reached it, DESIGN 8) and the tree's nodes, and
@@ -9,8 +10,12 @@ Steps are grouped by the crossings of the state they start from and by a class o
 same in every state: R1 on an end segment or an inner one, Cross of a tip over the other end segment
 or over an inner one, R2. ``--detail`` groups by the move itself instead (segment numbers are those of
 the state the move starts from, so one move there can name different physical acts in two states).
-Prints steps tried, steps that reached their state, the distinct (node, next state) pairs, goals and
-runs per group; --json writes the figures.
+``--by origin`` splits each group by where its node came from: ``arrived`` (its parent is in another
+state: a step or an expansion that changed the state), ``same`` (a curve from a node in the same state
+that changed only the configuration) or ``root``. ``--by free`` splits it by the node's free rope: the
+links from each end to its first crossing, summed (``twisted.proposals.segment_bounds``), in the bins
+of :data:`FREE_BINS`. Prints steps tried, steps that reached their state, the distinct (node, next
+state) pairs, goals and runs per group; --json writes the figures.
 """
 
 from __future__ import annotations
@@ -21,9 +26,11 @@ from collections import defaultdict
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+import numpy as np
 from sqlalchemy import select
 
 from twisted.moves import Move, explains
+from twisted.proposals import segment_bounds
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import StoredNode, load_run
@@ -77,17 +84,27 @@ def finished_runs(
 
 
 def stored_pairs(
-    store: Any, sets: Sequence[str] | None, labels: Sequence[str] | None
+    store: Any,
+    sets: Sequence[str] | None,
+    labels: Sequence[str] | None,
+    parents: dict[int, PData] | None = None,
 ) -> Iterator[tuple[int, str, StoredNode, PData, Move | None, float, float]]:
     """Every (node, requested next state) pair of the finished evaluation runs toward ``sets`` under
     ``labels`` (all when None or empty), from the runs' ``pair`` statistics: run id, goal key, the node,
     the next state, the move that explains the step (None when no one move does), steps tried and
-    reached. Runs made before the pair statistics were kept are skipped."""
+    reached. Runs made before the pair statistics were kept are skipped. ``parents``, when given, holds
+    the state of each node's parent (by ``seq``; the root has none) of the run whose pairs are being
+    yielded."""
     for run_id, goal_key in finished_runs(store, sets, labels):
         info = load_run(store, run_id)
         if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
             continue  # a run made before the pair statistics were kept
         nodes = {node.seq: node for node in info.nodes}
+        if parents is not None:
+            parents.clear()
+            parents.update(
+                {n.seq: nodes[n.parent_seq].p_data for n in info.nodes if n.parent_seq is not None}
+            )
         for key, (tried, reached) in info.checkpoint.stats["pair"].items():
             seq, next_key = key.split("|", 1)
             node = nodes[int(seq)]
@@ -95,25 +112,61 @@ def stored_pairs(
             yield run_id, goal_key, node, next_state, explains(node.p_data, next_state), tried, reached
 
 
+# --by free: upper bounds (links) of the free-rope bins
+FREE_BINS = (2.0, 4.0, 6.0, 10.0, float("inf"))
+
+
+def free_rope(points: Any) -> float:
+    """Links of rope from each end to its first crossing, summed (the whole rope without crossings)."""
+    bounds = segment_bounds(points)
+    if len(bounds) == 2:  # no crossing: one segment, head to tail
+        return float(bounds[1] - bounds[0])
+    return float(bounds[1] - bounds[0] + bounds[-1] - bounds[-2])
+
+
+def split_name(by: str | None, node: StoredNode, parent: PData | None, free: float) -> str:
+    """The ``--by`` part of a group's name for a step from ``node`` (whose parent is in ``parent`` and
+    whose free rope is ``free``)."""
+    if by == "origin":
+        return "root" if parent is None else "same" if parent == node.p_data else "arrived"
+    if by == "free":
+        upper = next(b for b in FREE_BINS if free <= b)
+        lower = max([0.0, *(b for b in FREE_BINS if b < upper)])
+        return f"free {lower:g}-{upper:g}" if upper != float("inf") else f"free > {lower:g}"
+    return ""
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_run_selection(ap)
     ap.add_argument("--level", type=int, action="append", help="only steps from states of N crossings")
     ap.add_argument("--detail", action="store_true", help="group by the move itself, not its class")
+    ap.add_argument(
+        "--by", choices=("origin", "free"), help="split each group by the node's origin or its free rope"
+    )
     ap.add_argument("--json", help="write the figures to this file")
     args = ap.parse_args()
 
     groups: dict[tuple[int, str], dict[str, Any]] = defaultdict(
         lambda: {"steps": 0.0, "reached": 0.0, "pairs": 0, "goals": set(), "runs": set()}
     )
+    parents: dict[int, PData] = {}
+    free_by_level: dict[int, list[float]] = defaultdict(list)  # --by free: each pair's node
     with open_store(args.db) as store:
-        for run_id, goal_key, node, _, move, tried, reached in stored_pairs(store, args.sets, args.labels):
+        pairs = stored_pairs(store, args.sets, args.labels, parents if args.by else None)
+        for run_id, goal_key, node, _, move, tried, reached in pairs:
             level = node.p_data.cross
             if args.level and level not in args.level:
                 continue
             if move is None:
                 continue
             name = str(move) if args.detail else move_class(move, node.p_data)
+            if args.by:
+                free = 0.0
+                if args.by == "free":
+                    free = free_rope(node.points)
+                    free_by_level[level].append(free)
+                name = f"{name}, {split_name(args.by, node, parents.get(node.seq), free)}"
             g = groups[(level, name)]
             g["steps"] += tried
             g["reached"] += reached
@@ -140,6 +193,11 @@ def main() -> None:
                 "goals": len(g["goals"]),
                 "runs": len(g["runs"]),
             }
+        )
+    if args.by == "free":
+        print(
+            "median free rope (links) of the pairs' nodes: "
+            + ", ".join(f"{np.median(f):.1f} from {level}" for level, f in sorted(free_by_level.items()))
         )
     if args.json:
         with open(args.json, "w") as f:

@@ -458,7 +458,7 @@ def test_the_committed_goal_sets_import() -> None:
     assert files, "goalsets/ holds the sets behind the figures"
     for path in files:
         text = path.read_text()
-        header = goal_file_header(text)
+        header = goal_file_header(json.loads(text))
         assert isinstance(header["seed"], int) and header["name"] == path.stem
         (goals,) = parse_goal_file(text).values()
         assert goals

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twisted.diagram import SegmentSide, diagram
+from twisted.diagram import SegmentSide, diagram, drawable
 from twisted.moves import (
     Move,
     Plan,
@@ -265,14 +265,6 @@ def _all_p_data(n: int) -> list[PData]:
     return out
 
 
-def _drawable(p: PData) -> bool:
-    try:
-        diagram(p)
-    except PDataError:
-        return False
-    return True
-
-
 def test_enumeration_counts_match_the_reference() -> None:
     layers = enumerate_states(4)
     assert [len(layers[n]) for n in range(5)] == [1, 4, 40, 528, 7968]
@@ -282,7 +274,7 @@ def test_enumeration_counts_match_the_reference() -> None:
 @pytest.mark.parametrize("n", [1, 2, 3])
 def test_enumeration_is_exactly_the_planar_p_data(n: int, states_to_3: dict[int, list[PData]]) -> None:
     """Moves from the empty rope reach every drawable P-data and nothing else (brute force)."""
-    planar = {p for p in _all_p_data(n) if _drawable(p)}
+    planar = {p for p in _all_p_data(n) if drawable(p)}
     assert set(states_to_3[n]) == planar
 
 
@@ -387,7 +379,7 @@ def test_sub_states_are_the_goal_with_crossings_deleted() -> None:
     # deleting the middle crossing leaves the undrawable 1-2-1-2: sub-states are only a necessary
     # condition, the BFS itself only ever meets drawable states
     virtual = parse_p_data('[[1,"O",3,"+"],[2,"O",4,"+"],[3,"U",1,"+"],[4,"U",2,"+"]]')
-    assert [p for p in subs if not _drawable(p)] == [virtual]
+    assert [p for p in subs if not drawable(p)] == [virtual]
 
 
 def test_plan_to_dict_is_json_and_round_trips() -> None:
@@ -417,7 +409,7 @@ some_state = st.sampled_from(_STATES)
 def test_every_successor_is_valid_p_data_with_more_crossings(p: PData) -> None:
     for s in successors(p):
         assert parse_p_data(s.state.to_list()) == s.state
-        assert _drawable(s.state)
+        assert drawable(s.state)
         added = 2 if s.move.kind == "R2" else 1
         assert s.state.cross == p.cross + added
         # the old crossings are all still there

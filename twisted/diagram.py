@@ -45,7 +45,7 @@ from typing import NamedTuple
 
 from twisted.topology import PData, PDataError
 
-__all__ = ["Diagram", "Face", "SegmentSide", "diagram"]
+__all__ = ["Diagram", "Face", "SegmentSide", "diagram", "drawable"]
 
 LEFT = "L"
 RIGHT = "R"
@@ -165,3 +165,13 @@ def diagram(p: PData) -> Diagram:
         )
     face_index = {side: i for i, face in enumerate(faces) for side in face.sides}
     return Diagram(p, tuple(faces), face_index)
+
+
+def drawable(p: PData) -> bool:
+    """Whether some planar rope has the P-data ``p`` (:func:`diagram` traces it). Deleting crossings from
+    a goal (``twisted.moves.sub_states``) can leave P-data that none has."""
+    try:
+        diagram(p)
+    except PDataError:
+        return False
+    return True

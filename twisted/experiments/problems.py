@@ -357,10 +357,13 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
     keys, prefixed ``name-`` when a name is given. Every goal is checked; the first bad one raises
     :class:`EvalInputError` naming set and index.
     """
-    from twisted.goals import GoalError, goal_from_spec
+    return _goals_of(_load_goal_json(text), name)
 
+
+def _load_goal_json(text: str) -> Any:
+    """The JSON of a goal file (64-bit integers only); EvalInputError when it is not JSON."""
     try:
-        data = json.loads(text, parse_int=json_int)
+        return json.loads(text, parse_int=json_int)
     except json.JSONDecodeError as exc:
         raise EvalInputError(
             f"goal file is not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
@@ -370,6 +373,12 @@ def parse_goal_file(text: str, name: str | None = None) -> dict[str, list[Goal]]
         raise EvalInputError(message) from None
     except PDataError as exc:  # an integer beyond 64 bits
         raise EvalInputError(f"goal file: {exc}") from None
+
+
+def _goals_of(data: Any, name: str | None) -> dict[str, list[Goal]]:
+    """The sets of a goal file's JSON, every goal checked (:func:`parse_goal_file`)."""
+    from twisted.goals import GoalError, goal_from_spec
+
     if isinstance(data, dict) and data.get("format") == GOAL_SET_FORMAT:
         if not isinstance(data.get("name"), str) or not isinstance(data.get("goals"), list):
             raise EvalInputError(
@@ -453,8 +462,9 @@ def read_goal_file(text: str, name: str | None = None) -> GoalFile:
     """Check a goal file completely (its goals and, for a goal-set file, its header); nothing is stored.
 
     A goal-set file (:func:`goal_set_file`) keeps its seed and how it was drawn for the set's row."""
-    goals = parse_goal_file(text, name)
-    header = goal_file_header(text)
+    data = _load_goal_json(text)
+    goals = _goals_of(data, name)
+    header = goal_file_header(data)
     return GoalFile(goals, header.get("seed"), drawn_parameters(header))
 
 
@@ -477,12 +487,9 @@ def drawn_parameters(header: Mapping[str, Any]) -> dict[str, Any]:
     return drawn
 
 
-def goal_file_header(text: str) -> dict[str, Any]:
-    """What a goal-set file says besides its goals (kind, seed, command ...); {} for plain goal files."""
-    try:
-        data = json.loads(text)
-    except (json.JSONDecodeError, RecursionError):
-        return {}
+def goal_file_header(data: Any) -> dict[str, Any]:
+    """What a goal-set file's JSON (:func:`json.loads` of it) says besides its goals (kind, seed, command
+    ...); {} for plain goal files."""
     if not isinstance(data, dict) or data.get("format") != GOAL_SET_FORMAT:
         return {}
     header = {k: v for k, v in data.items() if k != "goals"}
