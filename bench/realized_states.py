@@ -13,10 +13,10 @@ take about half a minute), and the share; then per goal curl count the runs and 
 the last step of each answer (the crossings it started from, and its move). Where the share falls with
 every curl, the rope makes states with many curls seldom, whatever the search asks for.
 
-Last, per goal (in the order of their first run), the nodes its own trees hold in its sub-states of
-one and two crossings fewer, against those the trees of the other goals' runs hold (and the distinct
-planar sub-states of one fewer): what a search could start from if it began with the configurations
-of earlier searches toward other goals.
+Last, per goal (in the order of their first run; a knot goal by its representative state), the nodes
+its own trees hold in its sub-states of one and two crossings fewer, against those the trees of the
+other goals' runs hold (and the distinct planar sub-states of one fewer): what a search could start
+from if it began with the configurations of earlier searches toward other goals.
 """
 
 from __future__ import annotations
