@@ -31,8 +31,7 @@ from twisted.model.sampler import ModelCurves
 from twisted.planner.options import PlannerOptions
 from twisted.planner.strategies import StepCurves
 from twisted.planner.tree import Node
-from twisted.proposals import CROSS_BEYOND_M, CROSS_END_PAD, CROSS_LIFT_M, segment_bounds
-from twisted.rope import N_LINKS
+from twisted.proposals import CROSS_BEYOND_M, CROSS_LIFT_M, segment_bounds, segment_points
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
@@ -65,14 +64,9 @@ def _segment_points(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """``n`` points along a P-data segment, clear of its crossings: rope parameters, links, points (x, y)
     and the rope's walking direction there (unit, x, y)."""
-    lo, hi = bounds[segment], bounds[segment + 1]
-    pad = min(CROSS_END_PAD, 0.25 * (hi - lo))
-    s = np.linspace(lo + pad, hi - pad, n)
-    link_of = np.clip(np.floor(s).astype(int), 0, N_LINKS - 1)
-    along = pts[link_of + 1, :2] - pts[link_of, :2]
-    at = pts[link_of, :2] + (s - link_of)[:, None] * along
-    along = along / np.maximum(np.hypot(along[:, 0], along[:, 1]), 1e-9)[:, None]
-    return s, link_of, at, along
+    s, link_of, at, along = segment_points(pts, bounds, segment, n)
+    along = along[:, :2] / np.maximum(np.hypot(along[:, 0], along[:, 1]), 1e-9)[:, None]
+    return s, link_of, at[:, :2], along
 
 
 def r2_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: R2Move) -> Curve:

@@ -41,6 +41,7 @@ __all__ = [
     "cross_reach",
     "propose_curve",
     "segment_bounds",
+    "segment_points",
 ]
 
 CURVE_PROPOSALS = ("uniform", "across")
@@ -113,6 +114,21 @@ def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:
     return np.concatenate([[0.0], visits, [float(len(pts) - 1)]])
 
 
+def segment_points(
+    pts: npt.NDArray[np.float64], bounds: npt.NDArray[np.float64], segment: int, n: int = 40
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """``n`` points along P-data segment ``segment`` of a rope (``bounds``: :func:`segment_bounds`), clear
+    of its crossings by :data:`CROSS_END_PAD` links (a quarter of a short segment): their rope
+    parameters, links, points and the direction of their links (head to tail, not normalised)."""
+    lo, hi = bounds[segment], bounds[segment + 1]
+    pad = min(CROSS_END_PAD, 0.25 * (hi - lo))
+    s = np.linspace(lo + pad, hi - pad, n)
+    link_of = np.clip(np.floor(s).astype(int), 0, N_LINKS - 1)
+    along = pts[link_of + 1] - pts[link_of]
+    at = pts[link_of] + (s - link_of)[:, None] * along
+    return s, link_of, at, along
+
+
 class _CrossAim(NamedTuple):
     """Where a Cross move can be aimed on a rope: points ``at`` of the crossed segment b (rope parameter
     ``s``, on link ``link_of``), which end's tip moves (``head``) and where it lies, the unit vectors
@@ -134,12 +150,7 @@ def _cross_aim(pts: npt.NDArray[np.float64], move: CrossMove, bounds: npt.NDArra
         raise ValueError(f"not a Cross move: {move}")
     if not 0 <= move.other_segment < len(bounds) - 1 or move.segment not in (0, len(bounds) - 2):
         raise ValueError(f"{move} does not fit a rope with {len(bounds) // 2 - 1} crossings")
-    lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
-    pad = min(CROSS_END_PAD, 0.25 * (hi - lo))
-    s = np.linspace(lo + pad, hi - pad, 40)
-    link_of = np.clip(np.floor(s).astype(int), 0, N_LINKS - 1)
-    along = pts[link_of + 1] - pts[link_of]
-    at = pts[link_of] + (s - link_of)[:, None] * along
+    s, link_of, at, along = segment_points(pts, bounds, move.other_segment)
     head = move.segment == 0
     tip = pts[0] if head else pts[-1]
     towards = at[:, :2] - tip[:2]
