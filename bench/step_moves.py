@@ -153,7 +153,7 @@ def main() -> None:
     parents: dict[int, PData] = {}
     free_by_level: dict[int, list[float]] = defaultdict(list)  # --by free: each pair's node
     with open_store(args.db) as store:
-        pairs = stored_pairs(store, args.sets, args.labels, parents if args.by else None)
+        pairs = stored_pairs(store, args.sets, args.labels, parents if args.by == "origin" else None)
         for run_id, goal_key, node, _, move, tried, reached in pairs:
             level = node.p_data.cross
             if args.level and level not in args.level:
