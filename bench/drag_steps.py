@@ -34,30 +34,30 @@ from twisted.planner.strategies import StepCurves
 from twisted.planner.tree import Node
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
-from twisted.store.search import load_run
+from twisted.store.search import SearchRunInfo
 
 
-def edge_accuracy(store: Any, run_ids: list[int]) -> None:
-    table: dict[int, Counter[str]] = defaultdict(Counter)
-    for run_id in run_ids:
-        info = load_run(store, run_id)
-        if info is None:
-            continue
-        nodes = {n.seq: n for n in info.nodes}
-        by_parent: dict[int, list[Any]] = defaultdict(list)
-        for n in info.nodes:
-            if n.parent_seq is not None and n.curve is not None and n.action == "curve":
-                by_parent[n.parent_seq].append(n)
-        for seq, children in by_parent.items():
-            parent = nodes[seq]
-            predicted = predicted_states(parent.points, np.array([c.curve for c in children]))
-            row = table[parent.p_data.cross]
-            for child, p in zip(children, predicted, strict=True):
-                row["edges"] += 1
-                row["right"] += p == child.p_data
-                if p.cross == parent.p_data.cross + 1:
-                    row["+1"] += 1
-                    row["+1 right"] += p == child.p_data
+def count_edges(table: dict[int, Counter[str]], info: SearchRunInfo) -> None:
+    """Add the kept curve edges of one run's tree to ``table`` (per parent crossings): edges, the child's
+    state predicted right, predicted one crossing on, and of those right."""
+    nodes = {n.seq: n for n in info.nodes}
+    by_parent: dict[int, list[Any]] = defaultdict(list)
+    for n in info.nodes:
+        if n.parent_seq is not None and n.curve is not None and n.action == "curve":
+            by_parent[n.parent_seq].append(n)
+    for seq, children in by_parent.items():
+        parent = nodes[seq]
+        predicted = predicted_states(parent.points, np.array([c.curve for c in children]))
+        row = table[parent.p_data.cross]
+        for child, p in zip(children, predicted, strict=True):
+            row["edges"] += 1
+            row["right"] += p == child.p_data
+            if p.cross == parent.p_data.cross + 1:
+                row["+1"] += 1
+                row["+1 right"] += p == child.p_data
+
+
+def print_edge_accuracy(table: dict[int, Counter[str]]) -> None:
     print("tree edges: the predicted state against the child's")
     print("| from | edges | predicted right | predicted +1 | of those right |")
     print("| --- | --- | --- | --- | --- |")
@@ -84,10 +84,11 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
 
     groups: dict[int, list[tuple[Node, Any, Any]]] = defaultdict(list)
-    seen, runs = set(), set()
+    seen = set()
+    edges: dict[int, Counter[str]] = defaultdict(Counter)
     with open_store(args.db) as store:
-        for run_id, _, stored, nxt, move, _, _ in stored_pairs(store, args.sets, args.labels):
-            runs.add(run_id)
+        pairs = stored_pairs(store, args.sets, args.labels, lambda info: count_edges(edges, info))
+        for run_id, _, stored, nxt, move, _, _ in pairs:
             if move is None or move.remove or stored.p_data.cross not in levels:
                 continue
             if (run_id, stored.seq, nxt.key) in seen:
@@ -95,7 +96,7 @@ def main() -> None:
             seen.add((run_id, stored.seq, nxt.key))
             node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
             groups[stored.p_data.cross].append((node, nxt, move))
-        edge_accuracy(store, sorted(runs))
+    print_edge_accuracy(edges)
 
     import torch
 
@@ -124,12 +125,12 @@ def main() -> None:
     with SimPool(args.workers) as pool:
         for (level, cls, name, with_pred, nxt), result in zip(owner, pool.run(jobs), strict=True):
             hit = bool(result.ok and result.p_data == nxt)
-            for key in ((level, cls), (level, "all")):
-                rows[key][name] += 1
-                rows[key][name + " hit"] += hit
+            for group in ((level, cls), (level, "all")):
+                rows[group][name] += 1
+                rows[group][name + " hit"] += hit
                 if with_pred and name == "planner":
-                    rows[key]["planner|pred"] += 1
-                    rows[key]["planner|pred hit"] += hit
+                    rows[group]["planner|pred"] += 1
+                    rows[group]["planner|pred hit"] += hit
     print(f"\nplan steps: {args.k} curves per pair and proposer, pool {args.pool}, seed {args.seed}")
     print("| from | move | pairs | with a predicted curve | planner's | planner's, same pairs | predicted |")
     print("| --- | --- | --- | --- | --- | --- | --- |")

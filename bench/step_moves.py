@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections import defaultdict
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,7 +33,7 @@ from twisted.moves import Move, explains
 from twisted.proposals import segment_bounds
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
-from twisted.store.search import StoredNode, load_run
+from twisted.store.search import SearchRunInfo, StoredNode, load_run
 from twisted.topology import PData, parse_p_data
 
 
@@ -87,24 +87,20 @@ def stored_pairs(
     store: Any,
     sets: Sequence[str] | None,
     labels: Sequence[str] | None,
-    parents: dict[int, PData] | None = None,
+    on_run: Callable[[SearchRunInfo], None] | None = None,
 ) -> Iterator[tuple[int, str, StoredNode, PData, Move | None, float, float]]:
     """Every (node, requested next state) pair of the finished evaluation runs toward ``sets`` under
     ``labels`` (all when None or empty), from the runs' ``pair`` statistics: run id, goal key, the node,
     the next state, the move that explains the step (None when no one move does), steps tried and
-    reached. Runs made before the pair statistics were kept are skipped. ``parents``, when given, holds
-    the state of each node's parent (by ``seq``; the root has none) of the run whose pairs are being
-    yielded."""
+    reached. Runs made before the pair statistics were kept are skipped. ``on_run``, when given, is
+    called with each run (its whole tree loaded) before its pairs are yielded."""
     for run_id, goal_key in finished_runs(store, sets, labels):
         info = load_run(store, run_id)
         if info is None or info.checkpoint is None or "pair" not in info.checkpoint.stats:
             continue  # a run made before the pair statistics were kept
+        if on_run is not None:
+            on_run(info)
         nodes = {node.seq: node for node in info.nodes}
-        if parents is not None:
-            parents.clear()
-            parents.update(
-                {n.seq: nodes[n.parent_seq].p_data for n in info.nodes if n.parent_seq is not None}
-            )
         for key, (tried, reached) in info.checkpoint.stats["pair"].items():
             seq, next_key = key.split("|", 1)
             node = nodes[int(seq)]
@@ -150,10 +146,16 @@ def main() -> None:
     groups: dict[tuple[int, str], dict[str, Any]] = defaultdict(
         lambda: {"steps": 0.0, "reached": 0.0, "pairs": 0, "goals": set(), "runs": set()}
     )
-    parents: dict[int, PData] = {}
+    parents: dict[int, PData] = {}  # --by origin: the state of each node's parent in the run being read
+
+    def note_parents(info: SearchRunInfo) -> None:
+        nodes = {node.seq: node for node in info.nodes}
+        parents.clear()
+        parents.update({n.seq: nodes[n.parent_seq].p_data for n in info.nodes if n.parent_seq is not None})
+
     free_by_level: dict[int, list[float]] = defaultdict(list)  # --by free: each pair's node
     with open_store(args.db) as store:
-        pairs = stored_pairs(store, args.sets, args.labels, parents if args.by == "origin" else None)
+        pairs = stored_pairs(store, args.sets, args.labels, note_parents if args.by == "origin" else None)
         for run_id, goal_key, node, _, move, tried, reached in pairs:
             level = node.p_data.cross
             if args.level and level not in args.level:
