@@ -25,7 +25,7 @@ from twisted.experiments.problems import (
     rank_by_frequency,
     split_thirds,
 )
-from twisted.experiments.report import load_results, success_curve, write_report
+from twisted.experiments.report import load_results, success_curve, success_until, write_report
 from twisted.experiments.runner import EvalOptions, run_eval
 from twisted.goals import state_goal
 from twisted.moves import enumerate_states, successors
@@ -337,6 +337,9 @@ def test_sigint_mid_goal_checkpoints_and_resumes_the_same_planner_run(
 
 def test_report_curves_and_table(db_url: str, tmp_path: Path) -> None:
     assert success_curve([1.0, None, 3.0, 2.0], [0.5, 1.0, 2.5, 10.0]).tolist() == [0.0, 0.25, 0.5, 0.75]
+    # beside longer runs, a series of 120 s runs ends at 120 s, with a goal solved just before it counted
+    times, fractions = success_until([1.0, None, 119.8], np.linspace(0.0, 900.0, 400), 120.0)
+    assert times[-1] == 120.0 and times.max() == 120.0 and fractions[-1] == 2 / 3
     with open_store(db_url) as store:
         _two_goal_set(store)
         with store.session(write=True) as session:

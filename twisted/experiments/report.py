@@ -86,6 +86,16 @@ def success_curve(times_s: Sequence[float | None], grid_s: npt.ArrayLike) -> np.
     return (solved[None, :] <= grid[:, None]).sum(axis=1) / len(times_s)
 
 
+def success_until(
+    times_s: Sequence[float | None], grid_s: npt.ArrayLike, timeout_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`success_curve` on the times of ``grid_s`` before ``timeout_s`` and at ``timeout_s`` itself
+    (times, fractions): a run says nothing past its timeout, so a series of shorter runs stops there."""
+    grid = np.asarray(grid_s, dtype=np.float64)
+    times = np.append(grid[grid < timeout_s], timeout_s)
+    return times, success_curve(times_s, times)
+
+
 def _series_label(planner: str, friction: float, timeout_s: float, many_timeouts: bool) -> str:
     label = planner
     if not math.isclose(friction, 1.0):
@@ -115,9 +125,9 @@ def _plot_curves(
     calls_grid = np.linspace(0.0, calls_max, 400)
     for key in sorted(groups):
         rows = groups[key]
-        y = success_curve([r.time_to_solve_s if r.solved else None for r in rows], grid)
+        times, y = success_until([r.time_to_solve_s if r.solved else None for r in rows], grid, key[2])
         n = len(rows)
-        (line,) = ax.step(grid, y, where="post", label=f"{label(*key)} ({sum(r.solved for r in rows)}/{n})")
+        (line,) = ax.step(times, y, where="post", label=f"{label(*key)} ({sum(r.solved for r in rows)}/{n})")
         # Simulator calls do not depend on how busy the machine was, but a run that timed out
         # only says "not solved within its calls": the curve stops at the fewest such calls.
         to_solve = [r.sim_calls_to_solve if r.solved else None for r in rows]
@@ -128,7 +138,7 @@ def _plot_curves(
             calls_grid[keep], success_curve(to_solve, calls_grid[keep]), where="post", color=line.get_color()
         )
     ax.set_xlim(0, t_max)
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel("time (s) (curve stops at its runs' timeout)")
     ax_calls.set_xlim(0, calls_max)
     ax_calls.set_xlabel("simulator calls (curve stops where a run timed out)")
     for a in (ax, ax_calls):
