@@ -51,7 +51,7 @@ def pull(points: Any, bounds: Any, segment: int, side: str, k: int, d: float) ->
     """The pull on link ``k`` past curl ``segment``'s crossing on ``side``, ``d`` metres away from the loop
     along its link; None when that link is off the rope."""
     if side == "after":
-        link = int(np.ceil(bounds[segment + 1])) + k
+        link = int(np.ceil(bounds[segment + 1])) + k - 1
         if link > N_LINKS - 1:
             return None
         direction = points[link + 1] - points[link]
