@@ -13,7 +13,8 @@ the head side (``before``) or the tail side (``after``), carried ``d`` = 2, 4 or
 its link points away from the loop, at the smallest lift (a plain :class:`twisted.sim.Curve`, simulated
 by :class:`twisted.sim.RopeSim`). Prints, per crossings, side, k and d: the pulls, those that left the
 node's state as it was, those of these that shortened the loop by half a link or more, and the median
-change of the loop (links) and of the free rope (links from each end to its first crossing, summed).
+change of the loop (links) and of the free rope (``step_moves.free_rope``: links from each end to its first
+crossing, summed).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from step_moves import add_run_selection, finished_runs  # bench/ is this script's folder
+from bottleneck import curl_segments  # bench/ is this script's folder
+from step_moves import add_run_selection, finished_runs, free_rope
 
 from twisted.proposals import segment_bounds
 from twisted.rope import N_LINKS
@@ -38,13 +40,8 @@ PULLS_M = (0.02, 0.04, 0.07)
 
 
 def inner_curls(p: PData) -> list[int]:
-    """The inner segments that are a curl's loop (between visits k and k + 1 of one crossing)."""
-    return sorted({min(o, u) for o, u, _ in p.crossings() if abs(o - u) == 1 and 0 < min(o, u) < 2 * p.cross})
-
-
-def free_links(bounds: Any) -> float:
-    """Links from each end to its first crossing, summed (``bounds``: ``segment_bounds`` of a rope)."""
-    return float(bounds[1] + (N_LINKS - bounds[-1]))
+    """The inner segments (not the two end segments) that are a curl's loop."""
+    return sorted(s for s in curl_segments(p) if 0 < s < 2 * p.cross)
 
 
 def pull(points: Any, bounds: Any, segment: int, side: str, k: int, d: float) -> Curve | None:
@@ -110,12 +107,13 @@ def main() -> None:
                                 sim.set_state(node.q)
                                 if not sim.apply(curve).ok or sim.p_data() != node.p_data:
                                     continue
-                                after = segment_bounds(sim.link_points())
+                                points = sim.link_points()
+                                after = segment_bounds(points)
                                 row["same"] += 1
                                 change = after[segment + 1] - after[segment] - loop
                                 row["shorter"] += change <= -0.5
                                 row["loop"].append(change)
-                                row["free"].append(free_links(after) - free_links(bounds))
+                                row["free"].append(free_rope(points) - free_rope(node.points))
 
     def median(values: list[float]) -> str:
         return f"{np.median(values):+.2f}" if values else "-"
