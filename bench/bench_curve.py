@@ -4,6 +4,7 @@
     python bench/bench_curve.py --curves 1000 --starts 200 --dense     # the rope's sparse constraint
                                                                        # Jacobian against a dense one
     python bench/bench_curve.py --curves 1000 --db sqlite:///tune.db --dense   # the planner's curves
+    python bench/bench_curve.py --curves 400 --db sqlite:///tune.db --against-timestep-s 0.01
 
 First a short random walk (not timed) collects reached configurations; then each timed curve
 starts from one of them, drawn at random. Prints the median and p90 wall time per action, the mean
@@ -17,6 +18,7 @@ starts are the planner's (knotted ropes, fewer links on the table) and so are th
 ``--dense`` also applies every curve with MuJoCo's dense constraint Jacobian (``jacobian="dense"``,
 the model's option before 2026-12-05) and prints its CPU time, how many curves ended in the same
 outcome (both rejected, or both in the same P-data) and how far the two end configurations lie apart.
+``--against-timestep-s S`` does the same with a time step of S seconds (the sparse Jacobian).
 """
 
 from __future__ import annotations
@@ -79,6 +81,7 @@ def main() -> None:
     parser.add_argument("--friction-scale", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dense", action="store_true", help="also with a dense constraint Jacobian")
+    parser.add_argument("--against-timestep-s", type=float, help="also with this time step (s)")
     parser.add_argument("--db", help="draw (start, curve) pairs from the edges of this store's search trees")
     args = parser.parse_args()
 
@@ -86,8 +89,12 @@ def main() -> None:
     sim = RopeSim(args.friction_scale, args.timestep_s)
     jobs = tree_edges(args.db, rng, args.curves) if args.db else None
     starts = reached_configurations(sim, rng, args.starts) if jobs is None else []
-    dense = RopeSim(args.friction_scale, args.timestep_s) if args.dense else None
-    if dense is not None:
+    if args.dense and args.against_timestep_s:
+        parser.error("--dense and --against-timestep-s compare one thing at a time")
+    dense = None  # the simulator the curves are compared against
+    if args.dense or args.against_timestep_s:
+        dense = RopeSim(args.friction_scale, args.against_timestep_s or args.timestep_s)
+    if args.dense and dense is not None:
         dense.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
     wall, cpu, steps, dense_cpu, apart = [], [], [], [], []
     same = 0
@@ -134,9 +141,11 @@ def main() -> None:
     )
     if dense is not None:
         d, gap = np.array(dense_cpu), np.array(apart)
+        dense_dt = dense.model.opt.timestep * 1000
+        name, base = ("dense Jacobian", "sparse one's") if args.dense else (f"dt = {dense_dt:g} ms", "first")
         print(
-            f"  dense Jacobian: cpu per action median {np.median(d):.4f} s, mean {d.mean():.4f} s "
-            f"({d.sum() / c.sum():.2f}x the sparse one's); the same outcome in {same} of {args.curves}; "
+            f"  {name}: cpu per action median {np.median(d):.4f} s, mean {d.mean():.4f} s "
+            f"({d.sum() / c.sum():.2f}x the {base}); the same outcome in {same} of {args.curves}; "
             f"end configurations apart by median {np.median(gap):.1e}, max {gap.max():.1e} (qpos, qvel)"
         )
 

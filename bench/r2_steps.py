@@ -35,7 +35,7 @@ from twisted.proposals import CROSS_BEYOND_M, CROSS_LIFT_M, segment_bounds, segm
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
-from twisted.topology import cross2
+from twisted.topology import PData, cross2
 
 OUTCOMES = ("reached", "fewer", "same", "other", "rejected")
 
@@ -153,11 +153,9 @@ def main() -> None:
         items = groups[level]
         for i in sorted(rng.choice(len(items), size=min(args.pairs, len(items)), replace=False)):
             node, nxt, move = items[int(i)]
-            own: list[Any] = []
-            while len(own) < args.k:
-                own += planner.propose(node, nxt, move, options.k, rng)[0]
+            own = planner_curves(planner, node, nxt, move, args.k, rng)
             scripted = [r2_move_curve(rng, node.points, move) for _ in range(args.k)]
-            for name, curves in (("planner", own[: args.k]), ("scripted", scripted)):
+            for name, curves in (("planner", own), ("scripted", scripted)):
                 jobs += [(node.q, c) for c in curves]
                 owner += [(level, name, int(i), node.p_data, nxt)] * len(curves)
     rows: dict[tuple[int, str], Counter[str]] = defaultdict(Counter)
@@ -165,34 +163,61 @@ def main() -> None:
     hit_pairs: dict[tuple[int, str], set[int]] = defaultdict(set)
     with SimPool(args.workers) as pool:
         for (level, name, pair, start, nxt), result in zip(owner, pool.run(jobs), strict=True):
-            if not result.ok:
-                what = "rejected"
-            elif result.p_data == nxt:
-                what = "reached"
+            what = outcome(result.ok, result.p_data, start, nxt)
+            if what == "reached":
                 hit_pairs[(level, name)].add(pair)
-            elif result.p_data.cross < start.cross:
-                what = "fewer"
-            else:
-                what = "same" if result.p_data == start else "other"
-                if what == "other":
-                    delta[(level, name)][result.p_data.cross - start.cross] += 1
+            elif what == "other" and result.p_data is not None:
+                delta[(level, name)][result.p_data.cross - start.cross] += 1
             rows[(level, name)][what] += 1
     for key in sorted(delta):
         print("other states by crossings added", key, dict(sorted(delta[key].items())))
     print(f"R2 steps: {args.k} curves per pair and proposer, seed {args.seed}")
+    drawn = {level: (min(args.pairs, len(groups[level])), len(groups[level])) for level in levels}
+    print_proposer_table(drawn, ("planner", "scripted"), rows, hit_pairs)
+
+
+def planner_curves(
+    planner: StepCurves, node: Node, nxt: Any, move: Any, k: int, rng: np.random.Generator
+) -> list[Any]:
+    """``k`` curves the planner proposes for the step (as many of its K-curve steps as it takes)."""
+    own: list[Any] = []
+    while len(own) < k:
+        own += planner.propose(node, nxt, move, PlannerOptions().k, rng)[0]
+    return own[:k]
+
+
+def outcome(ok: bool, p: PData | None, start: PData, nxt: PData) -> str:
+    """Where one curve of a step from ``start`` toward ``nxt`` went (one of :data:`OUTCOMES`)."""
+    if not ok or p is None:
+        return "rejected"
+    if p == nxt:
+        return "reached"
+    if p.cross < start.cross:
+        return "fewer"
+    return "same" if p == start else "other"
+
+
+def print_proposer_table(
+    drawn: dict[int, tuple[int, int]],
+    names: tuple[str, ...],
+    rows: dict[tuple[int, str], Counter[str]],
+    hit_pairs: dict[tuple[int, str], set[int]],
+) -> None:
+    """The markdown table of the curves of each proposer by crossings of the steps' start: ``drawn`` maps
+    a crossing count to (pairs drawn, pairs there were); ``rows`` counts the :data:`OUTCOMES` and
+    ``hit_pairs`` holds the pairs with a curve that reached, both per (crossings, proposer)."""
     print(
         "| from | pairs (of) | proposer | curves reached | pairs reached | " + " | ".join(OUTCOMES[1:]) + " |"
     )
     print("| --- | --- | --- | --- | --- | " + " | ".join("---" for _ in OUTCOMES[1:]) + " |")
-    for level in levels:
-        n_pairs = min(args.pairs, len(groups[level]))
-        for name in ("planner", "scripted"):
+    for level, (n_pairs, of) in drawn.items():
+        for name in names:
             row = rows[(level, name)]
             n = sum(row.values())
             if not n:
                 continue
             print(
-                f"| {level} | {n_pairs} ({len(groups[level])}) | {name} | {row['reached']} / {n} "
+                f"| {level} | {n_pairs} ({of}) | {name} | {row['reached']} / {n} "
                 f"({row['reached'] / n:.1%}) | {len(hit_pairs[(level, name)])} | "
                 + " | ".join(str(row[k]) for k in OUTCOMES[1:])
                 + " |"

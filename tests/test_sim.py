@@ -119,6 +119,17 @@ def test_gripper_path_lifts_carries_and_lowers(sim: RopeSim) -> None:
         assert 0.2 < np.mean(speed) < 0.4 and speed.max() < 0.8  # about 0.3 m/s, smooth
 
 
+def test_gripper_path_can_be_slowed_to_a_least_duration(sim: RopeSim) -> None:
+    sim.reset()
+    curve = Curve(4, 0.03, 0.3, -0.2)
+    plain = sim.gripper_path(curve)
+    np.testing.assert_array_equal(sim.gripper_path(curve, min_duration_s=0.1), plain)  # shorter: no change
+    slow = sim.gripper_path(curve, min_duration_s=3.0)
+    assert len(slow) == round(3.0 / sim.model.opt.timestep) > len(plain)
+    np.testing.assert_allclose(slow[-1], plain[-1], atol=1e-12)  # the same line to the same target
+    assert slow[:, 2].max() == pytest.approx(plain[:, 2].max(), abs=1e-4)
+
+
 def test_grasp_welds_exactly_one_link(sim: RopeSim) -> None:
     sim.reset()
     sim.grasp(7)

@@ -258,16 +258,17 @@ class RopeSim:
 
     # ---- the curve action -------------------------------------------------------------------------
 
-    def gripper_path(self, curve: Curve) -> FloatArray:
+    def gripper_path(self, curve: Curve, min_duration_s: float = 0.0) -> FloatArray:
         """The gripper positions, one per time step, for ``curve`` from the current configuration.
 
         A straight horizontal line to the target with minimum-jerk timing, plus a height arc
-        ``lift * sin(pi s)`` over the line from the link's height down to the release height.
+        ``lift * sin(pi s)`` over the line from the link's height down to the release height. The
+        carry lasts at least ``min_duration_s`` (a bench that also turns the gripper slows it down).
         """
         start = self.data.xpos[self._link_body[curve.link]].copy()
         dxy = np.array([curve.x_m, curve.y_m])
         lift = max(curve.z_max_m, 0.0) + MIN_LIFT_M
-        duration = max(MIN_MOVE_S, (float(np.hypot(*dxy)) + 2.0 * lift) / GRIPPER_SPEED_M_S)
+        duration = max(MIN_MOVE_S, min_duration_s, (float(np.hypot(*dxy)) + 2.0 * lift) / GRIPPER_SPEED_M_S)
         n = max(1, math.ceil(duration / self.model.opt.timestep))
         s = minimum_jerk(np.arange(1, n + 1) / n)
         path = np.empty((n, 3))
