@@ -91,12 +91,14 @@ def main() -> None:
     starts = reached_configurations(sim, rng, args.starts) if jobs is None else []
     if args.dense and args.against_timestep_s:
         parser.error("--dense and --against-timestep-s compare one thing at a time")
-    dense = None  # the simulator the curves are compared against
+    if args.against_timestep_s is not None and not args.against_timestep_s > 0:
+        parser.error(f"--against-timestep-s must be positive, got {args.against_timestep_s}")
+    other = None  # the simulator the curves are compared against
     if args.dense or args.against_timestep_s:
-        dense = RopeSim(args.friction_scale, args.against_timestep_s or args.timestep_s)
-    if args.dense and dense is not None:
-        dense.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
-    wall, cpu, steps, dense_cpu, apart = [], [], [], [], []
+        other = RopeSim(args.friction_scale, args.against_timestep_s or args.timestep_s)
+    if args.dense and other is not None:
+        other.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
+    wall, cpu, steps, other_cpu, apart = [], [], [], [], []
     same = 0
     rejected: collections.Counter[str] = collections.Counter()
     for i in range(args.curves):
@@ -112,13 +114,13 @@ def main() -> None:
         steps.append(outcome.steps)
         if not outcome.ok:
             rejected[(outcome.reason or "?").split(" (")[0]] += 1
-        if dense is not None:
-            dense.set_state(start)
+        if other is not None:
+            other.set_state(start)
             c0 = time.thread_time()
-            other = dense.apply(curve)
-            dense_cpu.append(time.thread_time() - c0)
-            same += outcome.ok == other.ok and (not outcome.ok or sim.p_data() == dense.p_data())
-            apart.append(float(np.abs(sim.state() - dense.state()).max()))
+            compared = other.apply(curve)
+            other_cpu.append(time.thread_time() - c0)
+            same += outcome.ok == compared.ok and (not outcome.ok or sim.p_data() == other.p_data())
+            apart.append(float(np.abs(sim.state() - other.state()).max()))
     w, c = np.array(wall), np.array(cpu)
     print(
         f"curve action, dt = {args.timestep_s * 1000:g} ms, {args.curves} curves from "
@@ -139,10 +141,10 @@ def main() -> None:
         f"  rejected: {sum(rejected.values())} of {args.curves}"
         + "".join(f"\n    {n:4d}  {reason}" for reason, n in rejected.most_common())
     )
-    if dense is not None:
-        d, gap = np.array(dense_cpu), np.array(apart)
-        dense_dt = dense.model.opt.timestep * 1000
-        name, base = ("dense Jacobian", "sparse one's") if args.dense else (f"dt = {dense_dt:g} ms", "first")
+    if other is not None:
+        d, gap = np.array(other_cpu), np.array(apart)
+        other_dt = other.model.opt.timestep * 1000
+        name, base = ("dense Jacobian", "sparse one's") if args.dense else (f"dt = {other_dt:g} ms", "first")
         print(
             f"  {name}: cpu per action median {np.median(d):.4f} s, mean {d.mean():.4f} s "
             f"({d.sum() / c.sum():.2f}x the {base}); the same outcome in {same} of {args.curves}; "

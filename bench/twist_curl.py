@@ -13,7 +13,7 @@ counter-clockwise (seen from above) for a curl of sign ``-`` and clockwise for `
 many one-crossing results from the straight rope have that sign).
 
 1. From the straight rope, ``--straight`` twist curves on uniform links 1-19 and turns of either sign, and
-   as many of the planner's curves for the R1 steps of the straight rope (one of its 8 curls, uniform):
+   as many of the planner's curves for the R1 steps of the straight rope (one of its 4 curls, uniform):
    how many made one crossing, and the loop of those curls (links between its two visits).
 2. For ``--pairs`` (node, next state) pairs per crossing count, drawn from the R1 steps (adding moves)
    that the stored runs asked for on an inner segment (``bench/step_moves.py``'s ``stored_pairs``),
