@@ -4,7 +4,7 @@
     python bench/bench_curve.py --curves 1000 --starts 200 --dense     # the rope's sparse constraint
                                                                        # Jacobian against a dense one
     python bench/bench_curve.py --curves 1000 --db sqlite:///tune.db --dense   # the planner's curves
-    python bench/bench_curve.py --curves 400 --db sqlite:///tune.db --against-timestep-s 0.01
+    python bench/bench_curve.py --curves 400 --db sqlite:///tune.db --label L --against-timestep-s 0.01
 
 First a short random walk (not timed) collects reached configurations; then each timed curve
 starts from one of them, drawn at random. Prints the median and p90 wall time per action, the mean
@@ -13,7 +13,9 @@ processes: compare figures from the same machine and load only.
 
 ``--db URL`` takes the curves of stored search trees instead (``twisted plan`` / ``eval`` runs): each
 timed curve is the curve of a tree edge, drawn at random, from its parent's configuration, so the
-starts are the planner's (knotted ropes, fewer links on the table) and so are the curves.
+starts are the planner's (knotted ropes, fewer links on the table) and so are the curves; ``--label L``
+(repeatable) keeps the trees of the evaluation runs under those labels, so that other runs joining the
+store later do not change the draw.
 
 ``--dense`` also applies every curve with MuJoCo's dense constraint Jacobian (``jacobian="dense"``,
 the model's option before 2026-12-05) and prints its CPU time, how many curves ended in the same
@@ -46,12 +48,16 @@ def reached_configurations(sim: RopeSim, rng: np.random.Generator, n: int) -> li
     return reached
 
 
-def tree_edges(url: str, rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, Curve]]:
-    """``n`` (parent configuration, curve) pairs drawn from the curve edges of the stored search trees."""
+def tree_edges(
+    url: str, rng: np.random.Generator, n: int, labels: list[str] | None = None
+) -> list[tuple[np.ndarray, Curve]]:
+    """``n`` (parent configuration, curve) pairs drawn from the curve edges of the stored search trees (of
+    the evaluation runs under ``labels`` only, when given)."""
     from sqlalchemy import select
     from sqlalchemy.orm import aliased
 
     from twisted.store import blob_to_array, open_store
+    from twisted.store.experiments import EvalResult
     from twisted.store.search import SearchNode
 
     parent = aliased(SearchNode)
@@ -60,6 +66,10 @@ def tree_edges(url: str, rng: np.random.Generator, n: int) -> list[tuple[np.ndar
         .join(parent, SearchNode.parent_id == parent.id)
         .where(SearchNode.link.is_not(None))
     )
+    if labels:
+        runs = select(EvalResult.plan_run_id).where(EvalResult.planner.in_(labels))
+        query = query.where(SearchNode.run_id.in_(runs))
+    query = query.order_by(SearchNode.id)  # the draw depends on the order: make it the store's
     with open_store(url, readonly=True) as store, store.session() as session:
         rows = session.execute(query).all()
     if len(rows) < n:
@@ -83,11 +93,17 @@ def main() -> None:
     parser.add_argument("--dense", action="store_true", help="also with a dense constraint Jacobian")
     parser.add_argument("--against-timestep-s", type=float, help="also with this time step (s)")
     parser.add_argument("--db", help="draw (start, curve) pairs from the edges of this store's search trees")
+    parser.add_argument(
+        "--label",
+        action="append",
+        dest="labels",
+        help="with --db: only the trees of these eval labels (repeatable)",
+    )
     args = parser.parse_args()
 
     rng = np.random.default_rng(args.seed)
     sim = RopeSim(args.friction_scale, args.timestep_s)
-    jobs = tree_edges(args.db, rng, args.curves) if args.db else None
+    jobs = tree_edges(args.db, rng, args.curves, args.labels) if args.db else None
     starts = reached_configurations(sim, rng, args.starts) if jobs is None else []
     if args.dense and args.against_timestep_s:
         parser.error("--dense and --against-timestep-s compare one thing at a time")
