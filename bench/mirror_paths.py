@@ -3,19 +3,19 @@
     python bench/mirror_paths.py --db sqlite:///tune.db --set tune-u5 --label L [--paths 30] [--curves 200]
         [--from 3] [--seed 0]
 
-The straight rope (``RopeSim.reset``) lies along x, centred on the origin, so two maps take it to itself:
-the mirror y -> -y (a curve ``(link, z, x, y)`` becomes ``(link, z, x, -y)``; every crossing sign flips,
-``PData.mirror``) and the half turn about z with the links numbered from the other end (``(20 - link, z,
--x, -y)``; positions walk backwards, ``PData.reverse``), and both. If the simulator were exactly
-symmetric, a mapped curve sequence from the straight rope would pass through the mapped states, and a
-search that reached the mirror image of its goal would have the goal too, by replaying its path mirrored
-(DESIGN 2, 4.4; the inverse model's augmentations use both maps).
+The inverse model's augmentations (``twisted.model.augment``) use two symmetries of the rope: the mirror
+y -> -y (a curve ``(link, z, x, y)`` becomes ``(link, z, x, -y)``; every crossing sign flips) and the
+reverse, the same physical rope with its links numbered from the other end (``(20 - link, z, x, y)``;
+positions walk backwards), and both; ``mirror_state`` / ``reverse_state`` map a simulator state. If the
+simulator were exactly symmetric, a mapped curve sequence from the mapped straight rope would pass through
+the mapped states (the mirror maps the straight rope, along x, to itself), and a search that reached the
+mirror image of its goal would have the goal too, by replaying its path mirrored (DESIGN 4.4).
 
-1. ``--curves`` uniform random curves from the straight rope, each simulated as drawn and mapped: how
-   far the mapped result's link points lie from the mapped points of the result (median and largest, m),
-   and in how many the mapped state is the state of the mapped curve.
+1. ``--curves`` uniform random curves from the straight rope, each simulated as drawn and mapped from the
+   mapped straight rope: how far the mapped result's link points lie from the mapped points of the result
+   (median and largest, m), and in how many the mapped state is the state of the mapped curve.
 2. ``--paths`` nodes of ``--from`` or more crossings drawn from the stored runs' trees (curve edges only):
-   their paths from the root replayed mapped, from the straight rope; a path holds when every step
+   their paths from the root replayed mapped, from the mapped straight rope; a path holds when every step
    reaches the mapped state of its node. Prints the paths that held, and where the others first left.
 """
 
@@ -27,34 +27,40 @@ from collections import Counter
 import numpy as np
 from step_moves import add_run_selection, finished_runs  # bench/ is this script's folder
 
-from twisted.rope import N_LINKS
+from twisted.model.augment import (
+    MIRROR,
+    REVERSE,
+    apply_variant_p_data,
+    mirror_curve,
+    mirror_points,
+    mirror_state,
+    reverse_curve,
+    reverse_points,
+    reverse_state,
+)
 from twisted.sim import Curve, RopeSim, sample_curve
 from twisted.store import open_store
 from twisted.store.search import load_run
 from twisted.topology import PData
 
-MAPS = ("mirror", "reverse", "both")
+MAPS = {"mirror": MIRROR, "reverse": REVERSE, "both": MIRROR | REVERSE}  # augment's variant bits
 
 
-def map_curve(curve: Curve, kind: str) -> Curve:
+def map_curve(curve: Curve, variant: int) -> Curve:
     """The curve that does to the mapped rope what ``curve`` does to the rope."""
-    if kind == "mirror":
-        return Curve(curve.link, curve.z_max_m, curve.x_m, -curve.y_m)
-    if kind == "reverse":
-        return Curve(N_LINKS - 1 - curve.link, curve.z_max_m, -curve.x_m, -curve.y_m)
-    return Curve(N_LINKS - 1 - curve.link, curve.z_max_m, -curve.x_m, curve.y_m)
+    a = curve.to_array()
+    a = mirror_curve(a) if variant & MIRROR else a
+    return Curve.from_array(reverse_curve(a) if variant & REVERSE else a)
 
 
-def map_state(p: PData, kind: str) -> PData:
-    return p.mirror() if kind == "mirror" else p.reverse() if kind == "reverse" else p.mirror().reverse()
+def map_points(points: np.ndarray, variant: int) -> np.ndarray:
+    points = mirror_points(points) if variant & MIRROR else points
+    return reverse_points(points) if variant & REVERSE else points
 
 
-def map_points(points: np.ndarray, kind: str) -> np.ndarray:
-    if kind == "mirror":
-        return points * [1.0, -1.0, 1.0]
-    if kind == "reverse":
-        return points[::-1] * [-1.0, -1.0, 1.0]
-    return points[::-1] * [-1.0, 1.0, 1.0]
+def map_state(sim: RopeSim, state: np.ndarray, variant: int) -> np.ndarray:
+    state = mirror_state(sim, state) if variant & MIRROR else state
+    return reverse_state(sim, state) if variant & REVERSE else state
 
 
 def main() -> None:
@@ -71,9 +77,7 @@ def main() -> None:
     sim = RopeSim()
     sim.reset()
     root = sim.state()
-    straight = sim.link_points()
-    off = {kind: float(np.abs(map_points(straight, kind) - straight).max()) for kind in MAPS}
-    print("the straight rope mapped lies on itself to " + ", ".join(f"{k} {v:.1e} m" for k, v in off.items()))
+    starts = {kind: map_state(sim, root, variant) for kind, variant in MAPS.items()}
 
     apart: dict[str, list[float]] = {kind: [] for kind in MAPS}
     same: Counter[str] = Counter()
@@ -84,11 +88,11 @@ def main() -> None:
         if not sim.apply(curve).ok:
             continue
         points, p = sim.link_points(), sim.p_data()
-        for kind in MAPS:
-            sim.set_state(root)
-            if sim.apply(map_curve(curve, kind)).ok:
-                apart[kind].append(float(np.abs(sim.link_points() - map_points(points, kind)).max()))
-                same[kind] += sim.p_data() == map_state(p, kind)
+        for kind, variant in MAPS.items():
+            sim.set_state(starts[kind])
+            if sim.apply(map_curve(curve, variant)).ok:
+                apart[kind].append(float(np.abs(sim.link_points() - map_points(points, variant)).max()))
+                same[kind] += sim.p_data() == apply_variant_p_data(p, variant)
         valid += 1
     print(f"\n{valid} valid random curves from the straight rope, seed {args.seed}")
     print("| map | mapped state reached | points apart, median | largest |")
@@ -117,10 +121,11 @@ def main() -> None:
     left: dict[str, Counter[int]] = {kind: Counter() for kind in MAPS}
     picked = rng.choice(len(paths), size=min(args.paths, len(paths)), replace=False) if paths else []
     for i in picked:
-        for kind in MAPS:
-            sim.set_state(root)
+        for kind, variant in MAPS.items():
+            sim.set_state(starts[kind])
             for step, (curve, p) in enumerate(paths[int(i)]):
-                if not sim.apply(map_curve(curve, kind)).ok or sim.p_data() != map_state(p, kind):
+                ok = sim.apply(map_curve(curve, variant)).ok
+                if not ok or sim.p_data() != apply_variant_p_data(p, variant):
                     left[kind][step + 1] += 1
                     break
             else:
