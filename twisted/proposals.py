@@ -145,6 +145,27 @@ class _CrossAim(NamedTuple):
     fits: npt.NDArray[np.bool_]
 
 
+def _approach(
+    tip: npt.NDArray[np.float64],
+    head: bool,
+    at: npt.NDArray[np.float64],
+    along: npt.NDArray[np.float64],
+    over: str,
+    sign: str,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """From a tip at ``tip`` (x, y) of the head's (``head``) or the tail's end piece, to the points ``at``
+    of a segment running along ``along``: the unit vectors toward them, their distances on the table, and
+    whether a straight approach crosses there ``over`` / under with ``sign``."""
+    towards = at[:, :2] - tip[:2]
+    dist = np.hypot(towards[:, 0], towards[:, 1]) + 1e-9
+    towards = towards / dist[:, None]
+    # the rope's walking direction (head -> tail) along the tip's piece where it will cross the segment
+    walk = -towards if head else towards
+    d_over, d_under = (walk, along[:, :2]) if over == "O" else (along[:, :2], walk)
+    fits = np.sign(cross2(d_over, d_under)) == (1 if sign == "+" else -1)
+    return towards, dist, fits
+
+
 def _cross_aim(pts: npt.NDArray[np.float64], move: CrossMove, bounds: npt.NDArray[np.float64]) -> _CrossAim:
     if move.other_segment is None or move.over not in ("O", "U") or move.sign not in ("+", "-"):
         raise ValueError(f"not a Cross move: {move}")
@@ -153,13 +174,7 @@ def _cross_aim(pts: npt.NDArray[np.float64], move: CrossMove, bounds: npt.NDArra
     s, link_of, at, along = segment_points(pts, bounds, move.other_segment)
     head = move.segment == 0
     tip = pts[0] if head else pts[-1]
-    towards = at[:, :2] - tip[:2]
-    dist = np.hypot(towards[:, 0], towards[:, 1]) + 1e-9
-    towards = towards / dist[:, None]
-    # the rope's walking direction (head -> tail) along the tip's piece where it will cross b
-    walk = -towards if head else towards
-    d_over, d_under = (walk, along[:, :2]) if move.over == "O" else (along[:, :2], walk)
-    fits = np.sign(cross2(d_over, d_under)) == (1 if move.sign == "+" else -1)
+    towards, dist, fits = _approach(tip, head, at, along, move.over, move.sign)
     return _CrossAim(s, link_of, at, head, tip, towards, dist, fits)
 
 
@@ -194,9 +209,26 @@ def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: Cros
     """A curve aimed at making ``move`` (a ``Cross``) from the rope with these N_POINTS link points."""
     pts = np.asarray(points, dtype=np.float64)
     aim = _cross_aim(pts, move, segment_bounds(pts))
+    c = int(rng.choice(len(aim.s), p=_aim_weights(aim)))
+    return _cross_curve(rng, pts, move, aim, c, rng.uniform(*CROSS_BEYOND_M))
+
+
+def _aim_weights(aim: _CrossAim) -> npt.NDArray[np.float64]:
+    """The probabilities of aiming at each point of b: nearer ones more often, only those that fit where
+    any does."""
     weights = np.exp(-aim.dist / CROSS_REACH_M) * (aim.fits if aim.fits.any() else 1.0)
-    c = int(rng.choice(len(aim.s), p=weights / weights.sum()))
-    beyond = rng.uniform(*CROSS_BEYOND_M)
+    return weights / weights.sum()
+
+
+def _cross_curve(
+    rng: np.random.Generator,
+    pts: npt.NDArray[np.float64],
+    move: CrossMove,
+    aim: _CrossAim,
+    c: int,
+    beyond: float,
+) -> Curve:
+    """The curve that crosses point ``c`` of b, the carried link put down ``beyond`` (m) past it."""
     lift = rng.uniform(*CROSS_LIFT_M)
     if move.over == "O":
         end = 0 if aim.head else N_LINKS - 1
