@@ -20,7 +20,10 @@ store later do not change the draw.
 ``--dense`` also applies every curve with MuJoCo's dense constraint Jacobian (``jacobian="dense"``,
 the model's option before 2026-12-05) and prints its CPU time, how many curves ended in the same
 outcome (both rejected, or both in the same P-data) and how far the two end configurations lie apart.
-``--against-timestep-s S`` does the same with a time step of S seconds (the sparse Jacobian).
+``--against-timestep-s S`` does the same with a time step of S seconds (the sparse Jacobian), and
+``--against-settle-speed V`` with the rope counted at rest once every link is slower than V m/s over two
+windows (``SETTLE_SPEED_M_S``, 0.01, otherwise). The steps per action are split into the carry and the
+settling after the release.
 """
 
 from __future__ import annotations
@@ -92,6 +95,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dense", action="store_true", help="also with a dense constraint Jacobian")
     parser.add_argument("--against-timestep-s", type=float, help="also with this time step (s)")
+    parser.add_argument("--against-settle-speed", type=float, help="also with this settle speed (m/s)")
     parser.add_argument("--db", help="draw (start, curve) pairs from the edges of this store's search trees")
     parser.add_argument(
         "--label",
@@ -105,16 +109,20 @@ def main() -> None:
     sim = RopeSim(args.friction_scale, args.timestep_s)
     jobs = tree_edges(args.db, rng, args.curves, args.labels) if args.db else None
     starts = reached_configurations(sim, rng, args.starts) if jobs is None else []
-    if args.dense and args.against_timestep_s:
-        parser.error("--dense and --against-timestep-s compare one thing at a time")
-    if args.against_timestep_s is not None and not args.against_timestep_s > 0:
-        parser.error(f"--against-timestep-s must be positive, got {args.against_timestep_s}")
+    against = [args.dense, args.against_timestep_s is not None, args.against_settle_speed is not None]
+    if sum(against) > 1:
+        parser.error("--dense, --against-timestep-s and --against-settle-speed compare one thing at a time")
+    for flag, value in (("timestep-s", args.against_timestep_s), ("settle-speed", args.against_settle_speed)):
+        if value is not None and not value > 0:
+            parser.error(f"--against-{flag} must be positive, got {value}")
     other = None  # the simulator the curves are compared against
-    if args.dense or args.against_timestep_s:
+    if any(against):
         other = RopeSim(args.friction_scale, args.against_timestep_s or args.timestep_s)
     if args.dense and other is not None:
         other.model.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
-    wall, cpu, steps, other_cpu, apart = [], [], [], [], []
+    if args.against_settle_speed is not None and other is not None:
+        other.settle_speed_m_s = args.against_settle_speed
+    wall, cpu, steps, settle, other_cpu, other_settle, apart = [], [], [], [], [], [], []
     same = 0
     rejected: collections.Counter[str] = collections.Counter()
     for i in range(args.curves):
@@ -128,6 +136,7 @@ def main() -> None:
         cpu.append(time.thread_time() - c0)
         wall.append(time.perf_counter() - w0)
         steps.append(outcome.steps)
+        settle.append(outcome.settle_steps)
         if not outcome.ok:
             rejected[(outcome.reason or "?").split(" (")[0]] += 1
         if other is not None:
@@ -135,6 +144,7 @@ def main() -> None:
             c0 = time.thread_time()
             compared = other.apply(curve)
             other_cpu.append(time.thread_time() - c0)
+            other_settle.append(compared.settle_steps)
             same += outcome.ok == compared.ok and (not outcome.ok or sim.p_data() == other.p_data())
             apart.append(float(np.abs(sim.state() - other.state()).max()))
     w, c = np.array(wall), np.array(cpu)
@@ -150,7 +160,8 @@ def main() -> None:
             f"mean {t.mean():.4f} s (reference 0.8 s, target <= 0.1 s)"
         )
     print(
-        f"  steps per action: mean {np.mean(steps):.0f}, median {np.median(steps):.0f}; "
+        f"  steps per action: mean {np.mean(steps):.0f} (carry {np.mean(steps) - np.mean(settle):.0f}, "
+        f"settling {np.mean(settle):.0f}), median {np.median(steps):.0f}; "
         f"{c.sum() / max(1, sum(steps)) * 1e6:.1f} us cpu per step"
     )
     print(
@@ -161,6 +172,9 @@ def main() -> None:
         d, gap = np.array(other_cpu), np.array(apart)
         other_dt = other.model.opt.timestep * 1000
         name, base = ("dense Jacobian", "sparse one's") if args.dense else (f"dt = {other_dt:g} ms", "first")
+        if args.against_settle_speed is not None:
+            speed, settled = args.against_settle_speed, np.mean(other_settle)
+            name = f"at rest under {speed:g} m/s ({settled:.0f} settling steps)"
         print(
             f"  {name}: cpu per action median {np.median(d):.4f} s, mean {d.mean():.4f} s "
             f"({d.sum() / c.sum():.2f}x the {base}); the same outcome in {same} of {args.curves}; "

@@ -130,6 +130,20 @@ def test_gripper_path_can_be_slowed_to_a_least_duration(sim: RopeSim) -> None:
     assert slow[:, 2].max() == pytest.approx(plain[:, 2].max(), abs=1e-4)
 
 
+def test_a_curve_reports_its_settling_steps_and_a_looser_rest_settles_sooner(sim: RopeSim) -> None:
+    curve = Curve(4, 0.03, 0.3, -0.2)
+    sim.reset()
+    out = sim.apply(curve)
+    assert out.ok and 0 < out.settle_steps < out.steps
+    assert out.steps - out.settle_steps <= len(sim.gripper_path(curve))  # the rest is the carry
+    loose = RopeSim()
+    loose.settle_speed_m_s = 10 * sim.settle_speed_m_s
+    loose.reset()
+    quick = loose.apply(curve)
+    assert quick.ok and quick.steps - quick.settle_steps == out.steps - out.settle_steps
+    assert 2 * loose.window_steps <= quick.settle_steps < out.settle_steps
+
+
 def test_grasp_welds_exactly_one_link(sim: RopeSim) -> None:
     sim.reset()
     sim.grasp(7)

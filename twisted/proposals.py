@@ -96,12 +96,17 @@ CROSS_TIP_LINK_P = 0.6
 
 
 class CrossMove(Protocol):
-    """What :func:`cross_move_curve` reads of a ``twisted.moves.Move`` of kind ``Cross``."""
+    """What :func:`cross_move_curve` reads of a ``twisted.moves.Move`` of kind ``Cross`` (read-only, as a
+    frozen ``Move`` has them)."""
 
-    segment: int
-    other_segment: int | None
-    over: str | None
-    sign: str | None
+    @property
+    def segment(self) -> int: ...
+    @property
+    def other_segment(self) -> int | None: ...
+    @property
+    def over(self) -> str | None: ...
+    @property
+    def sign(self) -> str | None: ...
 
 
 def segment_bounds(points: npt.ArrayLike) -> npt.NDArray[np.float64]:

@@ -128,11 +128,13 @@ def sample_curve(rng: np.random.Generator) -> Curve:
 
 @dataclass(frozen=True, slots=True)
 class CurveOutcome:
-    """Result of :meth:`RopeSim.apply`: ``ok=False`` comes with the reason; ``steps`` simulated."""
+    """Result of :meth:`RopeSim.apply`: ``ok=False`` comes with the reason; ``steps`` simulated, of them
+    ``settle_steps`` after the release."""
 
     ok: bool
     reason: str | None
     steps: int
+    settle_steps: int = 0
 
 
 def minimum_jerk(tau: FloatArray) -> FloatArray:
@@ -168,6 +170,8 @@ class RopeSim:
         self._geom_link = np.full(m.ngeom, -1)
         self._geom_link[self._link_geom] = np.arange(N_LINKS)
         self._window_steps = max(1, round(SETTLE_WINDOW_S / m.opt.timestep))
+        # the speed under which the rope counts as at rest (an attribute so that a bench can vary it)
+        self.settle_speed_m_s = SETTLE_SPEED_M_S
         self._settle_cap_steps = round(SETTLE_CAP_S / m.opt.timestep)
         self.reset()
 
@@ -360,10 +364,10 @@ class RopeSim:
         reason, settle_steps = self._settle()
         steps = carry_steps + settle_steps
         if reason is not None:
-            return CurveOutcome(False, reason, steps)
+            return CurveOutcome(False, reason, steps, settle_steps)
         self.forward()  # kinematics of the final state for link_points()
         reason = self.invalid_reason()
-        return CurveOutcome(reason is None, reason, steps)
+        return CurveOutcome(reason is None, reason, steps, settle_steps)
 
     def _carry(self, link: int, path: FloatArray) -> tuple[str | None, int]:
         """Move the gripper along ``path``, one point per step; (reason to stop or None, steps).
@@ -403,7 +407,7 @@ class RopeSim:
             now = self.link_positions()
             moved = float(np.max(np.linalg.norm(now - last, axis=1)))
             last = now
-            quiet = quiet + 1 if moved < SETTLE_SPEED_M_S * window_s else 0
+            quiet = quiet + 1 if moved < self.settle_speed_m_s * window_s else 0
             if quiet >= 2:
                 return None, steps
         speed = moved / window_s
