@@ -17,10 +17,10 @@ none: no point fits (the fit class none).
 ``--simulate N`` then asks whether the steps with no fitting point can be made by one curve at all: for
 ``N`` pairs of each (crossings, over / under, fit class none or some) of the table (drawn with ``--seed``),
 8 scripted Cross curves (``twisted.proposals.cross_move_curve``) and 8 curves near the move without the
-sign rule (:func:`near_curve`: for "U" a link inside b carried to a uniform point within 10 cm of the
-tip, for "O" the tip's link or the next carried to a uniform point within 12 cm of a uniform point of
-b) are simulated from the node's configuration (``--workers`` processes): the curves and the pairs that
-reached the requested state.
+sign rule (:func:`near_curve`: for "U" a link inside b carried to a point in a uniform direction and at a
+uniform distance up to 10 cm from the tip, for "O" the tip's link or the next carried likewise up to 12 cm
+from a uniformly drawn point of b) are simulated from the node's configuration (``--workers``
+processes): the curves and the pairs that reached the requested state.
 """
 
 from __future__ import annotations

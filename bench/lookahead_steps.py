@@ -1,20 +1,19 @@
 """Does aiming the tip's landing for the plan's next move make the next step more often?
 
     python bench/lookahead_steps.py --db sqlite:///tune.db --set tune-u5 --label L [--from 3] [--pairs 60] \
-        [--k 6] [--then-k 3] [--workers 2] [--seed 0]
+        [--k 6] [--then-k 3] [--draws 16] [--workers 2] [--seed 0]
 
 A plan step toward a Cross move of the tip over segment b ("O") puts the tip down somewhere past b; where
 decides whether the next step, another Cross of the same end, can be made by a straight carry
-(``twisted.proposals.cross_fit``, ``cross_reach``). A look-ahead curve draws the
-landing with that in view (:func:`lookahead_curve`, here only: it was tried in the planner's scripted Cross
-curve and not kept, docs/log/2026-12-05.md). This bench takes the (node, next
-state) pairs of stored runs whose node has ``--from`` crossings, whose step is such an "O" Cross and
-whose next state is one move (an adding Cross of the same end) from the run's goal: the penultimate step.
-For each pair it simulates ``--k`` scripted curves without the look-ahead and ``--k`` with it, and from
-every result in the next state ``--then-k`` scripted curves for the last move (``then``, no look-ahead
-beyond it). Printed per proposer: the curves that reached the next state, those whose result lies with a
-fitting point for the last move (``cross_fit`` > 0) and with a reach under 0.5, the last steps tried
-from them and reached (the goal), and the pairs with a goal reached.
+(``twisted.proposals.cross_fit``, ``cross_reach``). A look-ahead curve (:func:`lookahead_curve`) draws the
+landing with that in view; it lives here only (it was tried in the planner's scripted Cross curve and not
+kept: docs/log/2026-12-05.md). The bench takes the (node, next state) pairs of stored runs whose node has
+``--from`` crossings, whose step is such an "O" Cross and whose next state is one move (an adding Cross of
+the same end) from the run's goal: the penultimate step. For each pair it simulates ``--k`` scripted curves
+without the look-ahead and ``--k`` with it (``--draws`` landings each), and from every result in the next
+state ``--then-k`` scripted curves for the last move. Printed per proposer: the curves that reached the next
+state, those whose result has a fitting point for the last move (``cross_fit`` > 0) and a reach under 0.5,
+the last-move curves tried from them and those that reached the goal, and the pairs with a goal reached.
 """
 
 from __future__ import annotations

@@ -85,10 +85,10 @@ class TwistSim(RopeSim):
         self.release()
         reason, settle_steps = self._settle()
         if reason is not None:
-            return CurveOutcome(False, reason, steps + settle_steps)
+            return CurveOutcome(False, reason, steps + settle_steps, settle_steps)
         self.forward()
         reason = self.invalid_reason()
-        return CurveOutcome(reason is None, reason, steps + settle_steps)
+        return CurveOutcome(reason is None, reason, steps + settle_steps, settle_steps)
 
 
 def twist_curve(rng: np.random.Generator, link: int, sign: str) -> tuple[Curve, float]:
