@@ -30,9 +30,16 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, segment_link, stored_pairs  # bench/ is this script's folder
 
-from twisted.proposals import cross_fit, cross_move_curve, cross_reach, segment_bounds, segment_points
+from twisted.proposals import (
+    CROSS_TIP_LINK_P,
+    cross_fit,
+    cross_move_curve,
+    cross_reach,
+    segment_bounds,
+    segment_points,
+)
 from twisted.rope import N_LINKS
 from twisted.sim import CURVE_HIGH, CURVE_LOW, Curve
 from twisted.sim.pool import SimPool
@@ -56,15 +63,13 @@ def near_curve(rng: np.random.Generator, points: Any, move: Any) -> Curve:
     head = move.segment == 0
     angle, lift = rng.uniform(0.0, 2.0 * np.pi), rng.uniform(0.03, 0.07)
     if move.over == "U":
-        lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
-        inside = [k for k in range(N_LINKS) if lo + 0.3 < k + 0.5 < hi - 0.3]
-        link = int(rng.choice(inside)) if inside else int(np.clip((lo + hi) / 2, 0, N_LINKS - 1))
+        link = segment_link(rng, pts, move.other_segment, bounds)
         target = (pts[0] if head else pts[-1])[:2] + rng.uniform(0.0, 0.10) * np.array(
             [np.cos(angle), np.sin(angle)]
         )
     else:
         end = 0 if head else N_LINKS - 1
-        link = end if rng.random() < 0.6 else end + (1 if head else -1)
+        link = end if rng.random() < CROSS_TIP_LINK_P else end + (1 if head else -1)
         _, _, at, _ = segment_points(pts, bounds, move.other_segment)
         target = at[int(rng.integers(len(at))), :2] + rng.uniform(0.0, 0.12) * np.array(
             [np.cos(angle), np.sin(angle)]

@@ -38,6 +38,7 @@ from twisted.store import open_store
 from twisted.topology import PData, cross2
 
 OUTCOMES = ("reached", "fewer", "same", "other", "rejected")
+PLANNER_K = PlannerOptions().k  # the curves of one of the planner's steps (its default K)
 
 
 # -- the scripted R2 curve (here only: it was not kept in the planner, log 2026-12-05) -----------------------
@@ -182,7 +183,7 @@ def planner_curves(
     """``k`` curves the planner proposes for the step (as many of its K-curve steps as it takes)."""
     own: list[Any] = []
     while len(own) < k:
-        own += planner.propose(node, nxt, move, PlannerOptions().k, rng)[0]
+        own += planner.propose(node, nxt, move, PLANNER_K, rng)[0]
     return own[:k]
 
 

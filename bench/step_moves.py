@@ -31,6 +31,7 @@ from sqlalchemy import select
 
 from twisted.moves import Move, explains
 from twisted.proposals import segment_bounds
+from twisted.rope import N_LINKS
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import SearchRunInfo, StoredNode, load_run
@@ -106,6 +107,17 @@ def stored_pairs(
             node = nodes[int(seq)]
             next_state = parse_p_data(json.loads(next_key))
             yield run_id, goal_key, node, next_state, explains(node.p_data, next_state), tried, reached
+
+
+def segment_link(
+    rng: np.random.Generator, points: Any, segment: int, bounds: np.ndarray | None = None
+) -> int:
+    """A whole link inside P-data ``segment`` of the rope with these link points, uniformly drawn (the
+    middle link when none is); ``bounds``: ``segment_bounds`` of the points, when known."""
+    bounds = segment_bounds(points) if bounds is None else bounds
+    lo, hi = bounds[segment], bounds[segment + 1]
+    inside = [link for link in range(N_LINKS) if lo + 0.3 < link + 0.5 < hi - 0.3]
+    return int(rng.choice(inside)) if inside else int(np.clip((lo + hi) / 2, 0, N_LINKS - 1))
 
 
 # --by free: upper bounds (links) of the free-rope bins

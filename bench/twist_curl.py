@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from bottleneck import curl_segments  # bench/ is this script's folder
 from r2_steps import outcome, planner_curves, print_proposer_table
-from step_moves import add_run_selection, stored_pairs
+from step_moves import add_run_selection, segment_link, stored_pairs
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -97,14 +97,6 @@ def twist_curve(rng: np.random.Generator, link: int, sign: str) -> tuple[Curve, 
     shift, angle = rng.uniform(0.0, TWIST_SHIFT_M), rng.uniform(0.0, 2 * math.pi)
     lift = float(rng.uniform(*TWIST_LIFT_M))
     return Curve(link, lift, float(shift * math.cos(angle)), float(shift * math.sin(angle))), turn
-
-
-def segment_link(rng: np.random.Generator, points: npt.ArrayLike, segment: int) -> int:
-    """A whole link inside ``segment`` of the rope with these link points (the middle link when none is)."""
-    bounds = segment_bounds(points)
-    lo, hi = bounds[segment], bounds[segment + 1]
-    inside = [link for link in range(N_LINKS) if lo + 0.3 < link + 0.5 < hi - 0.3]
-    return int(rng.choice(inside)) if inside else int(np.clip((lo + hi) / 2, 0, N_LINKS - 1))
 
 
 def curl_loop(points: npt.ArrayLike, p: PData) -> float | None:
