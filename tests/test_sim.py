@@ -144,6 +144,26 @@ def test_a_curve_reports_its_settling_steps_and_a_looser_rest_settles_sooner(sim
     assert 2 * loose.window_steps <= quick.settle_steps < out.settle_steps
 
 
+def test_a_watch_sees_the_release_and_every_settling_window_and_changes_nothing(sim: RopeSim) -> None:
+    curve = Curve(4, 0.03, 0.3, -0.2)
+    sim.reset()
+    plain = sim.apply(curve)
+    after = sim.state()
+    seen: list[int] = []
+
+    def record(points: np.ndarray, steps: int) -> None:
+        assert points.shape == (N_LINKS + 1, 3)
+        seen.append(steps)
+
+    sim.reset()
+    watched = sim.apply(curve, record)
+    np.testing.assert_array_equal(sim.state(), after)
+    assert watched == plain
+    carry = plain.steps - plain.settle_steps
+    assert seen == [carry + k * sim.window_steps for k in range(len(seen))]
+    assert seen[-1] == plain.steps  # the last window is the one the rope came to rest in
+
+
 def test_grasp_welds_exactly_one_link(sim: RopeSim) -> None:
     sim.reset()
     sim.grasp(7)

@@ -11,6 +11,7 @@ grasp never leak into the next action, in this process or another.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -61,6 +62,9 @@ MAX_PENETRATION_M = LINK_RADIUS_M
 # per action against 0.064 s, with the same rejections (none from the physics), crossings settled
 # with a ~2-radius vertical gap and the same random-curve crossing statistics.
 DEFAULT_TIMESTEP_S = 0.005
+
+# An observer of a curve's settling (RopeSim.apply): called with the link points and the steps so far.
+Watch = Callable[[FloatArray, int], None]
 
 _INSTABILITY_WARNINGS = [
     int(mujoco.mjtWarning.mjWARN_BADQACC),
@@ -342,9 +346,12 @@ class RopeSim:
             float(np.linalg.norm(d.mocap_pos[self._tail_gripper] - d.xpos[tail_body])),
         )
 
-    def apply(self, curve: Curve) -> CurveOutcome:
+    def apply(self, curve: Curve, watch: Watch | None = None) -> CurveOutcome:
         """Simulate one curve from the current state; deterministic given ``state()`` and ``curve``.
 
+        ``watch``, when given, is called with the link points at the release and after every settling
+        window (``SETTLE_WINDOW_S``) and the steps simulated so far; it only looks (``bench/settle_loss.py``
+        records where a result loses its crossings).
         On ``ok=False`` the rope is left in an invalid configuration: restore a state before reuse.
         """
         self.set_state(self.state())  # resets everything but q: the result depends on q alone
@@ -361,7 +368,9 @@ class RopeSim:
         self.release()
         if reason is not None:
             return CurveOutcome(False, reason, carry_steps)
-        reason, settle_steps = self._settle()
+        if watch is not None:
+            watch(self.link_points(), carry_steps)
+        reason, settle_steps = self._settle(watch, carry_steps)
         steps = carry_steps + settle_steps
         if reason is not None:
             return CurveOutcome(False, reason, steps, settle_steps)
@@ -391,8 +400,9 @@ class RopeSim:
                 break
         return None, steps
 
-    def _settle(self) -> tuple[str | None, int]:
-        """Step until every link is slower than SETTLE_SPEED over two consecutive windows."""
+    def _settle(self, watch: Watch | None = None, before: int = 0) -> tuple[str | None, int]:
+        """Step until every link is slower than SETTLE_SPEED over two consecutive windows (``watch``: see
+        :meth:`apply`; ``before``: the steps of the carry, which it is told with the settling's)."""
         window = self._window_steps
         window_s = window * self.model.opt.timestep
         last = self.link_positions()
@@ -404,6 +414,8 @@ class RopeSim:
                     return reason, steps
             if (reason := self.invalid_reason()) is not None:
                 return reason, steps
+            if watch is not None:
+                watch(self.link_points(), before + steps)
             now = self.link_positions()
             moved = float(np.max(np.linalg.norm(now - last, axis=1)))
             last = now
