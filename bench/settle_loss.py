@@ -6,8 +6,8 @@
 A result enters the search tree only when its crossings stay between its parent's and the goal's
 (``Twisted.keeps``, DESIGN 8); every other curve is simulated to the end of its settling all the same.
 For ``--pairs`` (node, next state) pairs per crossing count drawn from the stored runs' plan steps
-(``bench/step_moves.py``'s ``stored_pairs``), this simulates ``--k`` of the planner's curves
-(``StepCurves`` with today's options) from the node's configuration with a watch
+(``bench/step_moves.py``'s ``stored_pairs``; runs toward a state goal only), this simulates ``--k`` of
+the planner's curves (``StepCurves`` with today's options) from the node's configuration with a watch
 (``RopeSim.apply(curve, watch)``) that records the crossings of the rope's projection at the release
 and after every settling window (it only looks: the outcomes are the simulator's own).
 
@@ -119,7 +119,10 @@ def main() -> None:
             if (run_id, stored.seq, nxt.key) in seen:
                 continue
             seen.add((run_id, stored.seq, nxt.key))
-            goal = parse_p_data(json.loads(goal_key)).cross
+            try:
+                goal = parse_p_data(json.loads(goal_key)).cross
+            except ValueError:  # a knot goal (not JSON P-data): its states need not share one crossing count
+                continue
             node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
             groups[stored.p_data.cross].append((node, nxt, move, goal))
 
