@@ -24,14 +24,13 @@ from collections import Counter, defaultdict
 from typing import Any
 
 import numpy as np
-from step_moves import add_run_selection, move_class, stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, move_class, step_groups  # bench/ is this script's folder
 
 from twisted.drag import DragPool, predicted_states
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
 from twisted.planner.options import PlannerOptions
 from twisted.planner.strategies import StepCurves
-from twisted.planner.tree import Node
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.search import SearchRunInfo
@@ -83,19 +82,11 @@ def main() -> None:
     levels = args.levels or [2, 3, 4]
     rng = np.random.default_rng(args.seed)
 
-    groups: dict[int, list[tuple[Node, Any, Any]]] = defaultdict(list)
-    seen = set()
     edges: dict[int, Counter[str]] = defaultdict(Counter)
     with open_store(args.db) as store:
-        pairs = stored_pairs(store, args.sets, args.labels, lambda info: count_edges(edges, info))
-        for run_id, _, stored, nxt, move, _, _ in pairs:
-            if move is None or move.remove or stored.p_data.cross not in levels:
-                continue
-            if (run_id, stored.seq, nxt.key) in seen:
-                continue
-            seen.add((run_id, stored.seq, nxt.key))
-            node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
-            groups[stored.p_data.cross].append((node, nxt, move))
+        groups = step_groups(
+            store, args.sets, args.labels, levels, on_run=lambda info: count_edges(edges, info)
+        )
     print_edge_accuracy(edges)
 
     import torch
@@ -108,10 +99,10 @@ def main() -> None:
     for level in levels:
         items = groups[level]
         for i in sorted(rng.choice(len(items), size=min(args.pairs, len(items)), replace=False)):
-            node, nxt, move = items[int(i)]
+            node, nxt, move, _ = items[int(i)]
             cls = move_class(move, node.p_data)
-            pool = DragPool(node.points, args.pool, rng)
-            predicted = [pool.curve(m) for m in pool.reaching(nxt)[: args.k]]
+            drag = DragPool(node.points, args.pool, rng)
+            predicted = [drag.curve(m) for m in drag.reaching(nxt)[: args.k]]
             for key in (cls, "all"):
                 found[(level, key, "pairs")] += 1
                 found[(level, key, "with")] += bool(predicted)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, step_groups  # bench/ is this script's folder
 
 from twisted.moves import explains
 from twisted.proposals import (  # the scripted Cross curve's parts (private: this bench varies them)
@@ -113,22 +113,20 @@ def main() -> None:
         ap.error("--draws must be at least 1")
     rng = np.random.default_rng(args.seed)
 
-    items: list[tuple[Any, Any, Any, Any, Any]] = []
-    seen = set()
+    def over_cross(move: Any, _: Any) -> bool:
+        return bool(move.kind == "Cross" and move.over == "O")
+
     with open_store(args.db) as store:
-        for run_id, goal_key, node, nxt, move, _, _ in stored_pairs(store, args.sets, args.labels):
-            if node.p_data.cross != args.level or move is None or move.remove or move.kind != "Cross":
-                continue
-            if move.over != "O" or (run_id, node.seq, nxt.key) in seen:
-                continue
-            goal = parse_p_data(json.loads(goal_key))
-            then = explains(nxt, goal)
-            if then is None or then.remove or then.kind != "Cross":
-                continue
-            if (then.segment == 0) != (move.segment == 0):
-                continue
-            seen.add((run_id, node.seq, nxt.key))
-            items.append((node, nxt, move, then, goal))
+        over = step_groups(store, args.sets, args.labels, [args.level], over_cross)
+    items: list[tuple[Any, Any, Any, Any, Any]] = []
+    for node, nxt, move, goal_key in over[args.level]:
+        goal = parse_p_data(json.loads(goal_key))
+        then = explains(nxt, goal)
+        if then is None or then.remove or then.kind != "Cross":
+            continue
+        if (then.segment == 0) != (move.segment == 0):
+            continue
+        items.append((node, nxt, move, then, goal))
     picked = sorted(rng.choice(len(items), size=min(args.pairs, len(items)), replace=False)) if items else []
     print(
         f"{len(items)} pairs from {args.level} crossings with an O Cross step before a last Cross of the "

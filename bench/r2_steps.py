@@ -24,7 +24,7 @@ from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
-from step_moves import add_run_selection, stored_pairs  # bench/ is this script's folder
+from step_moves import add_run_selection, step_groups  # bench/ is this script's folder
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -51,13 +51,19 @@ R2_SQUARE_POWER = 2.0
 
 
 class R2Move(Protocol):
-    """What :func:`r2_move_curve` reads of a ``twisted.moves.Move`` of kind ``R2``."""
+    """What :func:`r2_move_curve` reads of a ``twisted.moves.Move`` of kind ``R2`` (read-only, as a frozen
+    ``Move`` has them)."""
 
-    segment: int
-    side: str | None
-    other_segment: int | None
-    other_side: str | None
-    over: str | None
+    @property
+    def segment(self) -> int: ...
+    @property
+    def side(self) -> str | None: ...
+    @property
+    def other_segment(self) -> int | None: ...
+    @property
+    def other_side(self) -> str | None: ...
+    @property
+    def over(self) -> str | None: ...
 
 
 def _segment_points(
@@ -131,17 +137,8 @@ def main() -> None:
     levels = args.levels or [1, 2, 3]
     rng = np.random.default_rng(args.seed)
 
-    groups: dict[int, list[tuple[Node, Any, Any]]] = defaultdict(list)
-    seen = set()
     with open_store(args.db) as store:
-        for run_id, _, stored, nxt, move, _, _ in stored_pairs(store, args.sets, args.labels):
-            if move is None or move.remove or move.kind != "R2" or stored.p_data.cross not in levels:
-                continue
-            if (run_id, stored.seq, nxt.key) in seen:
-                continue
-            seen.add((run_id, stored.seq, nxt.key))
-            node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
-            groups[stored.p_data.cross].append((node, nxt, move))
+        groups = step_groups(store, args.sets, args.labels, levels, lambda move, _: move.kind == "R2")
 
     import torch
 
@@ -153,7 +150,7 @@ def main() -> None:
     for level in levels:
         items = groups[level]
         for i in sorted(rng.choice(len(items), size=min(args.pairs, len(items)), replace=False)):
-            node, nxt, move = items[int(i)]
+            node, nxt, move, _ = items[int(i)]
             own = planner_curves(planner, node, nxt, move, args.k, rng)
             scripted = [r2_move_curve(rng, node.points, move) for _ in range(args.k)]
             for name, curves in (("planner", own), ("scripted", scripted)):

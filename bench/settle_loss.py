@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 from r2_steps import planner_curves  # bench/ is this script's folder
-from step_moves import add_run_selection, stored_pairs
+from step_moves import add_run_selection, step_groups
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -64,6 +64,15 @@ class HoldingSim(RopeSim):
                 if self.step() is not None:
                     break
         super().release()
+
+
+def goal_cross(goal_key: str) -> int | None:
+    """The crossings of a state goal; None for a knot goal (its key is not P-data, and its states need not
+    share one crossing count: its runs are left out)."""
+    try:
+        return parse_p_data(json.loads(goal_key)).cross
+    except ValueError:
+        return None
 
 
 def crossings(points: Any) -> int:
@@ -110,21 +119,11 @@ def main() -> None:
     levels = args.levels or [0, 1, 2, 3, 4]
     rng = np.random.default_rng(args.seed)
 
-    groups: dict[int, list[tuple[Node, Any, Any, int]]] = defaultdict(list)
-    seen = set()
     with open_store(args.db) as store:
-        for run_id, goal_key, stored, nxt, move, _, _ in stored_pairs(store, args.sets, args.labels):
-            if move is None or move.remove or stored.p_data.cross not in levels:
-                continue
-            if (run_id, stored.seq, nxt.key) in seen:
-                continue
-            seen.add((run_id, stored.seq, nxt.key))
-            try:
-                goal = parse_p_data(json.loads(goal_key)).cross
-            except ValueError:  # a knot goal (not JSON P-data): its states need not share one crossing count
-                continue
-            node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
-            groups[stored.p_data.cross].append((node, nxt, move, goal))
+        steps = step_groups(store, args.sets, args.labels, levels)
+    groups: dict[int, list[tuple[Node, Any, Any, int]]] = defaultdict(list)
+    for level, found in steps.items():
+        groups[level] = [(n, nxt, m, c) for n, nxt, m, key in found if (c := goal_cross(key)) is not None]
 
     import torch
 

@@ -30,6 +30,7 @@ import numpy as np
 from sqlalchemy import select
 
 from twisted.moves import Move, explains
+from twisted.planner.tree import Node
 from twisted.proposals import segment_bounds
 from twisted.rope import N_LINKS
 from twisted.store import open_store
@@ -107,6 +108,36 @@ def stored_pairs(
             node = nodes[int(seq)]
             next_state = parse_p_data(json.loads(next_key))
             yield run_id, goal_key, node, next_state, explains(node.p_data, next_state), tried, reached
+
+
+# A plan step of a stored search as the benches simulate it: (node, next state, move, goal key)
+StepPair = tuple[Node, PData, Move, str]
+
+
+def step_groups(
+    store: Any,
+    sets: Sequence[str] | None,
+    labels: Sequence[str] | None,
+    levels: Sequence[int],
+    wanted: Callable[[Move, PData], bool] | None = None,
+    on_run: Callable[[SearchRunInfo], None] | None = None,
+) -> dict[int, list[StepPair]]:
+    """The distinct adding plan steps of :func:`stored_pairs` (one move explains them and it adds
+    crossings) whose node has a crossing count in ``levels`` and, when ``wanted`` is given, whose move and
+    node's state it accepts, grouped by that count in the order met; the node as the planner's ``Node``."""
+    groups: dict[int, list[StepPair]] = defaultdict(list)
+    seen = set()
+    for run_id, goal_key, stored, nxt, move, _, _ in stored_pairs(store, sets, labels, on_run):
+        if move is None or move.remove or stored.p_data.cross not in levels:
+            continue
+        if wanted is not None and not wanted(move, stored.p_data):
+            continue
+        if (run_id, stored.seq, nxt.key) in seen:
+            continue
+        seen.add((run_id, stored.seq, nxt.key))
+        node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
+        groups[stored.p_data.cross].append((node, nxt, move, goal_key))
+    return groups
 
 
 def segment_link(

@@ -28,13 +28,12 @@ from __future__ import annotations
 import argparse
 import math
 from collections import Counter, defaultdict
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from bottleneck import curl_segments  # bench/ is this script's folder
 from r2_steps import outcome, planner_curves, print_proposer_table
-from step_moves import add_run_selection, segment_link, stored_pairs
+from step_moves import add_run_selection, segment_link, step_groups
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -169,27 +168,24 @@ def main() -> None:
     print(f"one-crossing twists with the sign they were turned for: {signed} of {made[('twist', 1)]}")
 
     # 2. the R1 steps of stored searches
-    groups: dict[int, list[tuple[Node, Any, Any]]] = defaultdict(list)
-    seen = set()
     with open_store(args.db) as store:
-        for run_id, _, stored, nxt, move, _, _ in stored_pairs(store, args.sets, args.labels):
-            c = stored.p_data.cross
-            if move is None or move.remove or move.kind != "R1" or c not in levels:
-                continue
-            if not 0 < move.segment < 2 * c or (run_id, stored.seq, nxt.key) in seen:
-                continue
-            seen.add((run_id, stored.seq, nxt.key))
-            node = Node(stored.seq, None, stored.q, stored.points, stored.p_data, None, 0, 0)
-            groups[c].append((node, nxt, move))
+        groups = step_groups(  # curls on inner segments
+            store,
+            args.sets,
+            args.labels,
+            levels,
+            lambda move, p: move.kind == "R1" and 0 < move.segment < 2 * p.cross,
+        )
     rows: dict[tuple[int, str], Counter[str]] = defaultdict(Counter)
     hit_pairs: dict[tuple[int, str], set[int]] = defaultdict(set)
     jobs, owner = [], []
     for level in levels:
         items = groups[level]
         for i in sorted(rng.choice(len(items), size=min(args.pairs, len(items)), replace=False)):
-            node, nxt, move = items[int(i)]
+            node, nxt, move, _ = items[int(i)]
             jobs += [(node.q, c) for c in planner_curves(planner, node, nxt, move, args.k, rng)]
             owner += [(level, int(i), node.p_data, nxt)] * args.k
+            assert move.sign is not None  # an R1 move names its curl's sign
             for _ in range(args.k):
                 curve, turn = twist_curve(rng, segment_link(rng, node.points, move.segment), move.sign)
                 sim.set_state(node.q)
