@@ -71,6 +71,33 @@ def test_knot_diagram_breaks_the_under_strand() -> None:
     plt.close(fig)
 
 
+def _label_boxes(fig: plt.Figure, ax: plt.Axes) -> list[tuple[float, float, float, float]]:
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    return [tuple(t.get_window_extent(renderer).extents) for t in ax.texts if t.get_text()[-1] in "+-"]
+
+
+def test_visit_labels_do_not_cover_each_other_or_leave_the_panel() -> None:
+    rng = np.random.default_rng(3)
+    drawn = 0
+    while drawn < 8:
+        pts = _random_rope(rng)
+        if not 2 <= top(pts).cross <= 5:
+            continue
+        for zoom in (False, True):
+            fig, ax = plt.subplots(figsize=(5, 4))
+            draw_knot_diagram(ax, pts, zoom=zoom)
+            boxes = _label_boxes(fig, ax)
+            assert len(boxes) == 2 * top(pts).cross
+            x0, y0, x1, y1 = ax.bbox.extents
+            for i, (a0, b0, a1, b1) in enumerate(boxes):
+                assert x0 <= a0 and a1 <= x1 and y0 <= b0 and b1 <= y1, "a label outside its panel"
+                for c0, d0, c1, d1 in boxes[i + 1 :]:
+                    assert min(a1, c1) <= max(a0, c0) or min(b1, d1) <= max(b0, d0), "two labels overlap"
+            plt.close(fig)
+        drawn += 1
+
+
 def test_goal_without_a_stored_rope_is_a_gauss_diagram(tmp_path: Path) -> None:
     out = render_goal(None, TREFOIL_LIKE, tmp_path / "goal.png")
     assert out.backend == "gauss"

@@ -63,22 +63,6 @@ def draw_knot_diagram(
     view = knot_zoom(pts, crossings) if zoom else None
     lo, hi = view if view is not None else (pts[:, :2].min(axis=0), pts[:, :2].max(axis=0))
     span = float((hi - lo).max()) or 1.0
-    if label_visits:
-        off = max(0.07 * span, 0.012)
-        for c in crossings:
-            x, y = c.xy
-            ax.plot(x, y, ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
-            for text, direction in visit_labels(pts, c):
-                ax.annotate(
-                    text,
-                    (x + off * direction[0], y + off * direction[1]),
-                    ha="center",
-                    va="center",
-                    fontsize=8,
-                    color=SIGN_COLOUR[c.sign],
-                    zorder=6,
-                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
-                )
     if view is not None:
         (x0, y0), (x1, y1) = view
         ax.set_xlim(x0, x1)
@@ -88,12 +72,82 @@ def draw_knot_diagram(
     else:
         ax.margins(0.12)
         ax.set_aspect("equal", adjustable="datalim")  # fill the panel rather than shrink it
+    if label_visits:
+        labels = []
+        for c in crossings:
+            ax.plot(c.xy[0], c.xy[1], ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
+            colour = SIGN_COLOUR[c.sign]
+            labels += [(text, c.xy, direction, colour) for text, direction in visit_labels(pts, c)]
+        _place_labels(ax, pts, labels, max(0.07 * span, 0.012))
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.legend(loc="best", fontsize=7, frameon=False)
     if title:
         ax.set_title(_wrap(title), fontsize=9)
     return crossings
+
+
+LABEL_FONT_PT = 8
+# where a visit label may go, tried in this order: times the offset, and degrees turned from its strand
+_LABEL_SPOTS = [(r, a) for r in (1.0, 1.6, 2.3) for a in (0, 35, -35, 70, -70, 110, -110, 180)]
+
+
+def _place_labels(
+    ax: Axes,
+    pts: npt.NDArray[np.float64],
+    labels: list[tuple[str, tuple[float, float], npt.NDArray[np.float64], str]],
+    off: float,
+) -> None:
+    """Write each visit label (text, its crossing, the direction along its strand, colour) ``off`` from its
+    crossing, at the first spot (:data:`_LABEL_SPOTS`) whose box overlaps no label placed before, stays
+    inside the panel and covers no rope; where none does, at the spot that does least of these."""
+    ax.apply_aspect()  # the data-to-pixel transform as it will be drawn
+    to_px = ax.transData.transform
+    frame = ax.bbox.extents
+    font_px = LABEL_FONT_PT * ax.figure.dpi / 72.0
+    # the rope's centreline sampled densely, in pixels
+    t = np.linspace(0.0, 1.0, 8, endpoint=False)
+    along = pts[:-1, None, :2] + t[None, :, None] * (pts[1:, None, :2] - pts[:-1, None, :2])
+    rope = to_px(along.reshape(-1, 2))
+    placed: list[npt.NDArray[np.float64]] = []
+    for text, (x, y), direction, colour in labels:
+        half = np.array([0.32 * font_px * len(text) + 2.0, 0.62 * font_px + 1.0])
+        best: tuple[float, tuple[float, float]] | None = None
+        for r, degrees in _LABEL_SPOTS:
+            a = np.radians(degrees)
+            d = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ direction
+            spot = (x + r * off * d[0], y + r * off * d[1])
+            centre = to_px(spot)
+            lo, hi = centre - half, centre + half
+            overlap = sum(_overlap(lo, hi, b) for b in placed) / float(np.prod(2 * half))
+            outside = bool(np.any(lo < frame[:2]) or np.any(hi > frame[2:]))
+            on_rope = bool(np.any(np.all((rope >= lo) & (rope <= hi), axis=1)))
+            cost = 10.0 * overlap + 5.0 * outside + 1.0 * on_rope
+            if best is None or cost < best[0]:
+                best = (cost, spot)
+            if cost == 0.0:
+                break
+        assert best is not None
+        spot = best[1]
+        centre = to_px(spot)
+        placed.append(np.concatenate([centre - half, centre + half]))
+        ax.annotate(
+            text,
+            spot,
+            ha="center",
+            va="center",
+            fontsize=LABEL_FONT_PT,
+            color=colour,
+            zorder=6,
+            bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.7},
+        )
+
+
+def _overlap(lo: npt.NDArray[np.float64], hi: npt.NDArray[np.float64], box: npt.NDArray[np.float64]) -> float:
+    """The area two boxes share (pixels): ``lo``-``hi`` and ``box`` = (x0, y0, x1, y1)."""
+    w = min(hi[0], box[2]) - max(lo[0], box[0])
+    h = min(hi[1], box[3]) - max(lo[1], box[1])
+    return float(max(w, 0.0) * max(h, 0.0))
 
 
 def _wrap(text: str, width: int = 70) -> str:
