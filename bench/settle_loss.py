@@ -49,16 +49,23 @@ Trace = tuple[list[tuple[int, int]], bool, str | None, int, int]
 
 class HoldingSim(RopeSim):
     """The simulator with the gripper holding the carried link still for ``hold_s`` seconds before it lets
-    go (the settling's validity checks and the penetration check run while it holds; their steps count)."""
+    go (the penetration check runs while it holds; its steps count). A carry that was rejected is let go
+    at once (its outcome is the rejection either way)."""
 
     def __init__(self, hold_s: float) -> None:
         super().__init__()
         self.hold_steps = round(hold_s / self.model.opt.timestep)
         self.held = 0
+        self._carried = False  # whether the last carry ended valid: a rejected one is let go at once
+
+    def _carry(self, link: int, path: Any) -> tuple[str | None, int]:
+        reason, steps = super()._carry(link, path)
+        self._carried = reason is None
+        return reason, steps
 
     def release(self) -> None:
         self.held = 0
-        if self.data.eq_active.any():
+        if self._carried and self.data.eq_active.any():
             for _ in range(self.hold_steps):
                 self.held += 1
                 if self.step() is not None:
