@@ -120,8 +120,15 @@ def test_repository_paths_are_found() -> None:
     assert repository_paths(text) == {"twisted/planner/search.py", "bench/x.py"}
 
 
-
 @pytest.mark.parametrize("page", CURRENT, ids=[str(p.relative_to(REPO)) for p in CURRENT])
 def test_the_files_a_page_names_exist(page: Path) -> None:
     missing = sorted(p for p in repository_paths(page.read_text()) - HISTORY if not (REPO / p).exists())
     assert not missing, f"{page.relative_to(REPO)} names files that are not in the repository: {missing}"
+
+
+def test_every_benchmark_script_has_a_row_on_the_benchmarks_page() -> None:
+    page = (REPO / "docs" / "benchmarks.md").read_text()
+    rows = set(re.findall(r"^\| `([a-z0-9_]+\.py)` \|", page, flags=re.M))
+    scripts = {p.name for p in (REPO / "bench").glob("*.py")}
+    assert scripts - rows == set(), "bench scripts without a row on docs/benchmarks.md"
+    assert rows - scripts == set(), "rows of docs/benchmarks.md naming no script in bench/"
