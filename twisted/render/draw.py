@@ -75,8 +75,8 @@ def draw_knot_diagram(
     if label_visits:
         labels = []
         for c in crossings:
-            ax.plot(c.xy[0], c.xy[1], ".", color=SIGN_COLOUR[c.sign], ms=6, zorder=5)
             colour = SIGN_COLOUR[c.sign]
+            ax.plot(c.xy[0], c.xy[1], ".", color=colour, ms=6, zorder=5)
             labels += [(text, c.xy, direction, colour) for text, direction in visit_labels(pts, c)]
         _place_labels(ax, pts, labels, max(0.07 * span, 0.012))
     ax.set_xlabel("x (m)")
