@@ -16,9 +16,11 @@ For ``--pairs`` (node, next state) pairs per crossing count drawn from the store
 configuration and simulates each on the default rope and on every ``--variant``: the hinge stiffness
 times ``stiffness``, the friction times ``friction`` (``RopeSim(friction_scale=...)``), the link radius
 set to ``radius`` metres (the compiled model's capsule sizes and bounds changed in place; the stored
-configurations were settled on the default rope and settle again on the variant). The curves and the
-starts are the same for every rope. Prints per rope and crossing count the curves that reached the step's
-next state, the pairs with at least one such curve, the rejected curves and the simulator steps per curve.
+configurations were settled on the default rope and settle again on the variant; the simulator's
+validity limits, such as the deepest penetration of one radius, stay those of the 10 mm rope). The
+curves and the starts are the same for every rope. Prints per rope and crossing count the curves that
+reached the step's next state, the pairs with at least one such curve, the rejected curves and the
+simulator steps per curve.
 """
 
 from __future__ import annotations
