@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 from r2_steps import planner_curves  # bench/ is this script's folder
-from step_moves import add_run_selection, step_groups
+from step_moves import add_run_selection, pool_map, step_groups
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -135,7 +135,7 @@ def main() -> None:
     print("| rope | from | pairs (of) | curves | reached | pairs reached | rejected | steps a curve |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for v in variants:
-        results = _run([(v, q, c, nk) for _, _, q, c, nk in jobs], args.workers)
+        results = pool_map(simulate, [(v, q, c, nk) for _, _, q, c, nk in jobs], args.workers)
         for level in levels:
             rows = [(j[1], r) for j, r in zip(jobs, results, strict=True) if j[0] == level]
             if not rows:
@@ -151,16 +151,6 @@ def main() -> None:
                 f"| {hit} | {rejected} ({rejected / n:.1%}) | {steps:.0f} |",
                 flush=True,
             )
-
-
-def _run(jobs: list[tuple[Variant, Any, Any, str]], workers: int) -> list[tuple[str, int]]:
-    if workers <= 1:
-        return [simulate(job) for job in jobs]
-    import multiprocessing
-
-    ctx = multiprocessing.get_context("forkserver")  # as the planner's pool (twisted.sim.pool)
-    with ctx.Pool(workers) as pool:
-        return pool.map(simulate, jobs, chunksize=8)
 
 
 if __name__ == "__main__":

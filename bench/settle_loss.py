@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 from r2_steps import planner_curves  # bench/ is this script's folder
-from step_moves import add_run_selection, step_groups
+from step_moves import add_run_selection, pool_map, step_groups
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -147,22 +147,12 @@ def main() -> None:
             owner += [(level, goal, nxt.key)] * len(curves)
     drawn = {lv: (min(args.pairs, len(groups[lv])), len(groups[lv])) for lv in levels}
     print(f"{args.k} planner curves per pair, seed {args.seed}; the curves as the planner simulates them")
-    results = _run([(q, c, 0.0) for q, c in jobs], args.workers)
+    results = pool_map(traced, [(q, c, 0.0) for q, c in jobs], args.workers)
     report(levels, owner, results, drawn, rules=True)
     if args.hold_s > 0:
         print(f"\nthe same curves with the link held {args.hold_s} s at the end of the carry")
-        held = _run([(q, c, args.hold_s) for q, c in jobs], args.workers)
+        held = pool_map(traced, [(q, c, args.hold_s) for q, c in jobs], args.workers)
         report(levels, owner, held, drawn, rules=False)
-
-
-def _run(jobs: list[tuple[Any, Any, float]], workers: int) -> list[Trace]:
-    if workers <= 1:
-        return [traced(job) for job in jobs]
-    import multiprocessing
-
-    ctx = multiprocessing.get_context("forkserver")  # as the planner's pool (twisted.sim.pool)
-    with ctx.Pool(workers) as pool:
-        return pool.map(traced, jobs, chunksize=8)
 
 
 # (name, the last window the rule looks at (0: the release), crossings under the parent's it takes; 0:

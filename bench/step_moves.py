@@ -24,7 +24,7 @@ import argparse
 import json
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from sqlalchemy import select
@@ -149,6 +149,23 @@ def segment_link(
     lo, hi = bounds[segment], bounds[segment + 1]
     inside = [link for link in range(N_LINKS) if lo + 0.3 < link + 0.5 < hi - 0.3]
     return int(rng.choice(inside)) if inside else int(np.clip((lo + hi) / 2, 0, N_LINKS - 1))
+
+
+J = TypeVar("J")
+R = TypeVar("R")
+
+
+def pool_map(fn: Callable[[J], R], jobs: Sequence[J], workers: int) -> list[R]:
+    """``fn`` over ``jobs`` in order: in this process when ``workers`` is 1 or less, else in that many
+    forkserver processes (as the planner's pool, ``twisted.sim.pool``; ``fn`` must be a module's top-level
+    function, and the calling script must start its work under ``if __name__ == "__main__"``)."""
+    if workers <= 1:
+        return [fn(job) for job in jobs]
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("forkserver")
+    with ctx.Pool(workers) as pool:
+        return pool.map(fn, jobs, chunksize=8)
 
 
 # --by free: upper bounds (links) of the free-rope bins
