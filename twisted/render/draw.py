@@ -112,7 +112,7 @@ def _place_labels(
     placed: list[npt.NDArray[np.float64]] = []
     for text, (x, y), direction, colour in labels:
         half = np.array([0.32 * font_px * len(text) + 2.0, 0.62 * font_px + 1.0])
-        best: tuple[float, tuple[float, float]] | None = None
+        best: tuple[float, tuple[float, float], npt.NDArray[np.float64]] | None = None
         for r, degrees in _LABEL_SPOTS:
             a = np.radians(degrees)
             d = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) @ direction
@@ -124,13 +124,12 @@ def _place_labels(
             on_rope = bool(np.any(np.all((rope >= lo) & (rope <= hi), axis=1)))
             cost = 10.0 * overlap + 5.0 * outside + 1.0 * on_rope
             if best is None or cost < best[0]:
-                best = (cost, spot)
+                best = (cost, spot, np.concatenate([lo, hi]))
             if cost == 0.0:
                 break
         assert best is not None
-        spot = best[1]
-        centre = to_px(spot)
-        placed.append(np.concatenate([centre - half, centre + half]))
+        _, spot, box = best
+        placed.append(box)
         ax.annotate(
             text,
             spot,
