@@ -44,6 +44,10 @@ class RopeParams:
     # random curves; with 0.01 s none in 400, at the same cost.
     contact_solref: tuple[float, float] = (0.01, 1.0)
     contact_solimp: tuple[float, float, float] = (0.9, 0.95, 0.001)  # MuJoCo's default
+    # The capsules' radius and density (MuJoCo's default, 1000 kg/m^3: a link of about 0.0136 kg). The
+    # planner's rope keeps these; a world apart from it (twisted.world) draws others per episode.
+    link_radius_m: float = LINK_RADIUS_M
+    link_density_kg_m3: float = 1000.0
 
 
 def link_name(i: int) -> str:
@@ -122,7 +126,7 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
             f'relpose="0 0 0 1 0 0 0" solref="{_fmt(*params.weld_solref)}"/>'
         )
     middle = (
-        f'<body name="{link_name(MIDDLE_LINK)}" pos="{_fmt(0, 0, LINK_RADIUS_M)}">'
+        f'<body name="{link_name(MIDDLE_LINK)}" pos="{_fmt(0, 0, params.link_radius_m)}">'
         f'<freejoint name="root"/>{_link_geom(MIDDLE_LINK)}'
         f"{_chain(MIDDLE_LINK - 1, -1)}{_chain(MIDDLE_LINK + 1, +1)}</body>"
     )
@@ -136,7 +140,8 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
     <default class="rope">
       <joint type="hinge" stiffness="{params.joint_stiffness:.10g}" damping="{params.joint_damping:.10g}"
              armature="{params.joint_armature:.10g}" limited="true" range="{_fmt(-lim, lim)}"/>
-      <geom type="capsule" size="{_fmt(LINK_RADIUS_M)}" rgba="0.8 0.3 0.2 1"/>
+      <geom type="capsule" size="{_fmt(params.link_radius_m)}" density="{params.link_density_kg_m3:.10g}"
+            rgba="0.8 0.3 0.2 1"/>
     </default>
   </default>
   <worldbody>

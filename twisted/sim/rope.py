@@ -150,11 +150,17 @@ class RopeSim:
     """The rope on the table with a mocap gripper; one MuJoCo model built once per instance."""
 
     def __init__(
-        self, friction_scale: float = 1.0, timestep_s: float = DEFAULT_TIMESTEP_S, tail_gripper: bool = False
+        self,
+        friction_scale: float = 1.0,
+        timestep_s: float = DEFAULT_TIMESTEP_S,
+        tail_gripper: bool = False,
+        params: RopeParams | None = None,
     ) -> None:
+        """``params``, when given, is the whole physics (a world apart from the planner's model,
+        :mod:`twisted.world`) and ``friction_scale`` / ``timestep_s`` are then not taken."""
         if not (math.isfinite(friction_scale) and friction_scale > 0):
             raise ValueError(f"friction_scale must be a positive number, got {friction_scale!r}")
-        self.params = RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
+        self.params = params or RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
         self.tail_gripper = tail_gripper  # the second gripper of the pull test (docs/DESIGN.md section 2.2)
         self.model = mujoco.MjModel.from_xml_string(rope_xml(self.params, tail_gripper=tail_gripper))
         self.data = mujoco.MjData(self.model)
