@@ -7,7 +7,8 @@ points) and every other link hangs off its neighbour towards the middle by a yaw
 and then a pitch about the new y (the order of the hinges in the MJCF, 2.1). Each hinge pair is read
 from the child's direction in the parent's frame. The roll of the middle link about its own axis is not
 seen in the points; the fit takes the roll whose hinge angles bend the chain least (the least elastic
-energy), which for a rope lying on a table is the horizontal one. Joint angles are clipped to the
+energy), which for a rope lying on a table is the horizontal one. Points lower than the model's link
+radius (less 2 mm) are raised to it (they lie on the table). Joint angles are clipped to the
 model's limits, the velocity is zero (a rope at rest), and the fit's residual is the RMS distance between
 the observed points and the points of the fitted configuration.
 """
@@ -29,6 +30,7 @@ from twisted.topology import PData, top
 FloatArray = npt.NDArray[np.float64]
 
 ROLL_GRID = 36  # roll candidates of the middle link, 10 degrees apart
+TABLE_GIVE_M = 0.002  # how far under one radius a resting rope's centreline may be seen before it is raised
 
 
 @dataclass(frozen=True)
@@ -114,6 +116,12 @@ class ChainFit:
             raise ValueError(f"observed points must be {N_POINTS} x 3 finite values, got shape {p.shape}")
         if np.min(np.linalg.norm(np.diff(p, axis=0), axis=1)) < 1e-9:
             raise ValueError("observed points: two neighbouring link points coincide")
+        observed = p
+        # a point lower than the model's resting height lies on the table: the model's rope rests with
+        # its centreline one radius up (less a contact's sub-millimetre give), and a chain fitted lower
+        # would be pressed into the table
+        p = p.copy()
+        p[:, 2] = np.maximum(p[:, 2], self.sim.params.link_radius_m - TABLE_GIVE_M)
         rolls = np.linspace(-math.pi, math.pi, ROLL_GRID, endpoint=False)
         candidates = [self._qpos(p, float(r)) for r in rolls]
         best = int(np.argmin([energy for _, energy in candidates]))
@@ -129,7 +137,7 @@ class ChainFit:
         q = np.concatenate([qpos, np.zeros(self.sim.model.nv)])
         self.sim.set_state(q)
         fitted = self.sim.link_points()
-        residual = float(np.sqrt(np.mean(np.sum((fitted - p) ** 2, axis=1))))
+        residual = float(np.sqrt(np.mean(np.sum((fitted - observed) ** 2, axis=1))))
         return Fit(q, fitted, residual)
 
     def at_rest(self, fit: Fit) -> tuple[FloatArray, FloatArray, PData] | None:

@@ -1,0 +1,343 @@
+"""`twisted execute` and `twisted tie`: plans carried out in a world apart from the planner's model.
+
+`execute RUN_ID --world LEVEL --seed S` sends a solved run's plan to a world drawn at LEVEL from seed S
+(open loop, or `--closed-loop`: observe after every action and replan from the observation when the rope
+left the plan); `tie --knot K --world LEVEL` plans in the model from the straight rope first. Every episode
+is stored (tables `episodes`, `episode_steps`; docs/DESIGN.md section 15).
+
+Exit codes: 0 the world's rope passed the pull test for the goal's knot; 2 bad input (an unknown or
+senseless level, a run without a plan, an episode that cannot be resumed: nothing written); 3 not tied
+(the pull test failed, or the budget ran out); 130 / 143 interrupted after storing the last observation
+(continue with `twisted execute --resume EPISODE`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import typer
+
+from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, check_workers, console, err_console, fail, open_db
+from cli.options import json_option, print_json
+
+
+def _level(text: str) -> Any:
+    from twisted.world import LevelError, parse_level
+
+    try:
+        return parse_level(text)
+    except LevelError as exc:
+        fail(f"--world {text}: {exc}")
+
+
+def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: int) -> None:
+    check_workers(workers)
+    if not 0.0 < drift_m <= 1.0:
+        fail(f"--drift {drift_m:g}: give a distance in metres in (0, 1]")
+    if timeout_s <= 0:
+        fail(f"--timeout {timeout_s:g}: give a positive number of seconds")
+    if max_actions < 1:
+        fail(f"--max-actions {max_actions}: give at least 1")
+
+
+def _world_options() -> dict[str, Any]:
+    return {
+        "world": typer.Option(
+            "moderate",
+            "--world",
+            help="Perturbation level: none | mild | moderate | strong, optionally with overrides, e.g. "
+            "'moderate,friction=0.5:2,observation_noise_m=0.003' (docs/DESIGN.md section 15.2).",
+        ),
+        "seed": typer.Option(
+            0, "--seed", min=0, max=2**63 - 1, help="The world's seed: one seed, one world."
+        ),
+        "closed_loop": typer.Option(
+            False, "--closed-loop/--open-loop", help="Observe after every action and replan when off plan."
+        ),
+        "timeout_s": typer.Option(
+            600.0, "--timeout", min=0.0, help="Wall-time budget of the episode in seconds, planning included."
+        ),
+        "max_actions": typer.Option(
+            30, "--max-actions", min=1, max=10_000, help="At most this many actions."
+        ),
+        "drift_m": typer.Option(
+            0.05,
+            "--drift",
+            help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
+        ),
+        "workers": typer.Option(1, "--workers", help="Simulator processes of each replan's search."),
+    }
+
+
+_OPT = _world_options()
+
+
+def _report(result: Any, as_json: bool, episode: dict[str, Any]) -> None:
+    data = {**episode, **result.to_dict()}
+    if as_json:
+        print_json(data)
+    else:
+        console.print(
+            f"episode {result.run_id}: {result.outcome} ({result.final_knot or 'no pull test'}); "
+            f"{result.actions} actions, {result.replans} replans, planning {result.planning_s:.1f} s, "
+            f"wall {result.elapsed_s:.1f} s",
+            highlight=False,
+        )
+    if result.outcome == "interrupted":
+        err_console.print(
+            f"interrupted: continue with `twisted execute --resume {result.run_id}`", highlight=False
+        )
+
+
+def _exit(result: Any, stop: Any) -> None:
+    if result.outcome == "tied":
+        raise typer.Exit(EXIT_OK)
+    if result.outcome == "interrupted":
+        raise typer.Exit(stop.exit_code)
+    raise typer.Exit(EXIT_NOT_REACHED)
+
+
+def _run(
+    ctx: typer.Context,
+    store: Any,
+    plan: Any,
+    goal: Any,
+    options: Any,
+    model_id: Any,
+    level: Any,
+    seed: int,
+    settings: Any,
+    workers: int,
+    stop: Any,
+    as_json: bool,
+    planner: Any = None,
+) -> Any:
+    """Create the episode, lay the world out and run it; the result."""
+    from twisted.experiments.episodes import Episode, ModelPlanner
+    from twisted.store.episodes import create_episode
+    from twisted.world import SimWorld
+
+    world = SimWorld(level, seed)
+    parameters = {"drift_m": settings.drift_m, "workers": workers, "level": level.to_dict()}
+    run_id = create_episode(
+        store,
+        parameters,
+        plan_run_id=plan.run_id,
+        goal_knot=goal.knot_label or goal.spec,
+        level=level.name,
+        level_ranges=level.to_dict(),
+        world_seed=seed,
+        physics=world.physics.to_dict(),
+        closed_loop=settings.closed_loop,
+        timeout_s=settings.timeout_s,
+        max_actions=settings.max_actions,
+    )
+    if planner is None:
+        planner = ModelPlanner(store, goal, options, model_id, workers, run_id, stop)
+    planner.episode_run_id = run_id
+    try:
+        episode = Episode(store, run_id, world, goal, planner, settings, stop, _progress(as_json))
+        return episode.run(episode.begin(plan))
+    finally:
+        planner.close()
+
+
+def _progress(as_json: bool) -> Any:
+    def show(line: str) -> None:
+        if not as_json:
+            err_console.print(line, highlight=False)
+
+    return show
+
+
+@app.command("execute")
+def execute_command(
+    ctx: typer.Context,
+    run_id: int | None = typer.Argument(
+        None, metavar="RUN_ID", help="A solved planner run.", show_default=False
+    ),
+    world: str = _OPT["world"],
+    seed: int = _OPT["seed"],
+    closed_loop: bool = _OPT["closed_loop"],
+    timeout_s: float = _OPT["timeout_s"],
+    max_actions: int = _OPT["max_actions"],
+    drift_m: float = _OPT["drift_m"],
+    workers: int = _OPT["workers"],
+    resume: int | None = typer.Option(
+        None,
+        "--resume",
+        metavar="EPISODE",
+        help="Continue a stopped episode from its last stored observation.",
+    ),
+    as_json: bool = json_option("the episode's outcome"),
+) -> None:
+    """Execute a solved run's plan in a world apart from the planner's model; store the episode."""
+    from twisted.experiments.episodes import EpisodeSettings
+    from twisted.runtime import StopSignals
+
+    if resume is not None:
+        if run_id is not None:
+            fail(f"--resume {resume} continues an episode as it was asked: drop RUN_ID {run_id}")
+        _resume(ctx, resume, as_json)
+        return
+    if run_id is None:
+        fail(
+            "RUN_ID is required: a solved planner run (`twisted plan ...` prints its id), or --resume EPISODE"
+        )
+    level = _level(world)
+    _check_budget(timeout_s, max_actions, drift_m, workers)
+    settings = EpisodeSettings(closed_loop, timeout_s, max_actions, drift_m)
+    store = open_db(ctx, needed_by=f"RUN_ID {run_id}")
+    plan, goal, options, model_id = _stored_plan(store, run_id)
+    stop = StopSignals()
+    with stop.installed():
+        result = _run(
+            ctx, store, plan, goal, options, model_id, level, seed, settings, workers, stop, as_json
+        )
+    _report(
+        result, as_json, {"plan_run": run_id, "level": level.name, "seed": seed, "closed_loop": closed_loop}
+    )
+    _exit(result, stop)
+
+
+def _stored_plan(store: Any, run_id: int) -> tuple[Any, Any, Any, Any]:
+    """The plan of solved run ``run_id``, its goal, options and model (exit 2, nothing written, otherwise)."""
+    from twisted.experiments.episodes import plan_of_run
+    from twisted.planner import PlanInputError, stored_options
+    from twisted.store.search import load_run
+
+    try:
+        plan = plan_of_run(store, run_id)
+        info = load_run(store, run_id, with_nodes=False)
+        assert info is not None  # plan_of_run found it
+        options = stored_options(info.parameters, run_id)
+    except PlanInputError as exc:
+        fail(f"RUN_ID {run_id}: {exc}")
+    return plan, info.goal, options, info.parameters.get("model_id")
+
+
+def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
+    from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, resume_state
+    from twisted.planner import PlanInputError
+    from twisted.runtime import StopSignals, process_alive
+    from twisted.store.episodes import EpisodeError, load_episode, reopen_episode
+    from twisted.world import Level, LevelError, SimWorld
+
+    store = open_db(ctx, needed_by=f"--resume {episode_id}")
+    try:
+        stored = load_episode(store, episode_id)
+    except EpisodeError as exc:
+        fail(f"--resume {episode_id}: {exc}")
+    if stored.outcome not in ("interrupted", "running"):
+        fail(f"--resume {episode_id}: the episode has ended ({stored.outcome}); nothing to continue")
+    import socket
+
+    if (
+        stored.status == "running"
+        and stored.host == socket.gethostname()
+        and stored.pid
+        and process_alive(stored.pid)
+    ):
+        fail(f"--resume {episode_id}: process {stored.pid} is still running it")
+    if stored.plan_run_id is None:
+        fail(f"--resume {episode_id}: the episode names no plan")
+    try:
+        level = Level.from_dict(stored.level_ranges)
+        world = SimWorld(level, stored.world_seed)
+        state, checkpoint = resume_state(store, stored.steps)
+        world.restore(checkpoint)
+    except (LevelError, PlanInputError, ValueError, KeyError, TypeError) as exc:
+        fail(f"--resume {episode_id}: the stored episode does not read back: {exc}")
+    plan, goal, options, model_id = _stored_plan(store, stored.plan_run_id)
+    parameters = _episode_parameters(store, episode_id)
+    drift_m = parameters.get("drift_m")
+    workers = parameters.get("workers")
+    if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
+        fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
+    reopen_episode(store, episode_id)
+    stop = StopSignals()
+    with stop.installed():
+        planner = ModelPlanner(store, goal, options, model_id, workers, episode_id, stop)
+        try:
+            episode = Episode(store, episode_id, world, goal, planner, settings, stop, _progress(as_json))
+            result = episode.run(state)
+        finally:
+            planner.close()
+    _report(result, as_json, {"resumed": True, "level": level.name, "seed": stored.world_seed})
+    _exit(result, stop)
+
+
+def _episode_parameters(store: Any, episode_id: int) -> dict[str, Any]:
+    from twisted.store.models import Run
+
+    with store.session() as session:
+        run = session.get(Run, episode_id)
+        return dict(run.parameters) if run is not None and isinstance(run.parameters, dict) else {}
+
+
+@app.command("tie")
+def tie_command(
+    ctx: typer.Context,
+    knot: str = typer.Option(
+        ..., "--knot", help="The knot to tie (overhand, figure-eight, 5_2, granny, ...)."
+    ),
+    world: str = _OPT["world"],
+    seed: int = _OPT["seed"],
+    closed_loop: bool = _OPT["closed_loop"],
+    timeout_s: float = _OPT["timeout_s"],
+    max_actions: int = _OPT["max_actions"],
+    drift_m: float = _OPT["drift_m"],
+    workers: int = _OPT["workers"],
+    planner_seed: int = typer.Option(0, "--planner-seed", min=0, max=2**63 - 1, help="Seed of the searches."),
+    as_json: bool = json_option("the episode's outcome"),
+) -> None:
+    """Plan KNOT in the model from the straight rope (with the pull test), then execute it in a world."""
+    import time
+
+    from twisted.experiments.episodes import EpisodeSettings, ModelPlanner, plan_of_run
+    from twisted.planner import PlanInputError, planner_options
+    from twisted.planner.untie import make_any_goal
+    from twisted.runtime import StopSignals
+
+    level = _level(world)
+    _check_budget(timeout_s, max_actions, drift_m, workers)
+    try:
+        goal = make_any_goal(None, knot, None)
+        options = planner_options({"tighten": True, "seed": planner_seed})
+    except PlanInputError as exc:
+        fail(f"--knot {knot}: {exc}")
+    settings = EpisodeSettings(closed_loop, timeout_s, max_actions, drift_m)
+    store = open_db(ctx)
+    stop = StopSignals()
+    with stop.installed():
+        planner = ModelPlanner(store, goal, options, None, workers, None, stop)
+        started = time.perf_counter()
+        plan_run, solved = planner.search(None, planner_seed, timeout_s)
+        planning_s = time.perf_counter() - started
+        if not solved:
+            planner.close()
+            err_console.print(
+                f"the model found no plan in {planning_s:.1f} s (run {plan_run})", highlight=False
+            )
+            raise typer.Exit(stop.exit_code if stop() else EXIT_NOT_REACHED)
+        if not as_json:
+            err_console.print(f"planned in the model: run {plan_run} in {planning_s:.1f} s", highlight=False)
+        plan = plan_of_run(store, plan_run)
+        settings.timeout_s = max(timeout_s - planning_s, 1.0)
+        result = _run(
+            ctx, store, plan, goal, options, None, level, seed, settings, workers, stop, as_json, planner
+        )
+    _report(
+        result,
+        as_json,
+        {
+            "knot": knot,
+            "plan_run": plan_run,
+            "model_planning_s": round(planning_s, 3),
+            "level": level.name,
+            "seed": seed,
+            "closed_loop": closed_loop,
+        },
+    )
+    _exit(result, stop)
