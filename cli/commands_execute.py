@@ -13,12 +13,18 @@ senseless level, a run without a plan, an episode that cannot be resumed: nothin
 
 from __future__ import annotations
 
-from typing import Any
+import functools
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import typer
 
 from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, check_workers, console, err_console, fail, open_db
 from cli.options import json_option, print_json
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _level(text: str) -> Any:
@@ -40,36 +46,89 @@ def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: i
         fail(f"--max-actions {max_actions}: give at least 1")
 
 
-def _world_options() -> dict[str, Any]:
-    return {
-        "world": typer.Option(
+# The options `execute` and `tie` share: name -> (type, Typer option).
+_WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
+    "world": (
+        str,
+        typer.Option(
             "moderate",
             "--world",
             help="Perturbation level: none | mild | moderate | strong, optionally with overrides, e.g. "
             "'moderate,friction=0.5:2,observation_noise_m=0.003' (docs/DESIGN.md section 15.2).",
         ),
-        "seed": typer.Option(
-            0, "--seed", min=0, max=2**63 - 1, help="The world's seed: one seed, one world."
-        ),
-        "closed_loop": typer.Option(
+    ),
+    "seed": (
+        int,
+        typer.Option(0, "--seed", min=0, max=2**63 - 1, help="The world's seed: one seed, one world."),
+    ),
+    "closed_loop": (
+        bool,
+        typer.Option(
             False, "--closed-loop/--open-loop", help="Observe after every action and replan when off plan."
         ),
-        "timeout_s": typer.Option(
+    ),
+    "timeout_s": (
+        float,
+        typer.Option(
             600.0, "--timeout", min=0.0, help="Wall-time budget of the episode in seconds, planning included."
         ),
-        "max_actions": typer.Option(
-            30, "--max-actions", min=1, max=10_000, help="At most this many actions."
-        ),
-        "drift_m": typer.Option(
+    ),
+    "max_actions": (
+        int,
+        typer.Option(30, "--max-actions", min=1, max=10_000, help="At most this many actions."),
+    ),
+    "drift_m": (
+        float,
+        typer.Option(
             0.05,
             "--drift",
             help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
         ),
-        "workers": typer.Option(1, "--workers", help="Simulator processes of each replan's search."),
-    }
+    ),
+    "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
+}
 
 
-_OPT = _world_options()
+@dataclass(frozen=True)
+class WorldRequest:
+    """What `execute` / `tie` were asked for about the world and the episode (checked: :meth:`check`)."""
+
+    world: str
+    seed: int
+    closed_loop: bool
+    timeout_s: float
+    max_actions: int
+    drift_m: float
+    workers: int
+
+    def check(self) -> tuple[Any, Any]:
+        """The level and the episode's settings; exit 2 before anything is opened when one makes no sense."""
+        from twisted.experiments.episodes import EpisodeSettings
+
+        level = _level(self.world)
+        _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
+        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
+
+
+def with_world_options(func: F) -> F:
+    """Give a command the options of :data:`_WORLD_OPTIONS`; it gets them as one ``world: WorldRequest``."""
+    signature = inspect.signature(func, eval_str=True)
+    kept = [p for name, p in signature.parameters.items() if name != "world"]
+    kind = inspect.Parameter.KEYWORD_ONLY
+    added = [
+        inspect.Parameter(name, kind, default=option, annotation=annotation)
+        for name, (annotation, option) in _WORLD_OPTIONS.items()
+    ]
+
+    @functools.wraps(func)
+    def command_function(*args: Any, **kwargs: Any) -> Any:
+        request = WorldRequest(**{name: kwargs.pop(name) for name in _WORLD_OPTIONS})
+        return func(*args, world=request, **kwargs)
+
+    parameters = kept + added
+    command_function.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+    command_function.__annotations__ = {p.name: p.annotation for p in parameters}
+    return command_function  # type: ignore[return-value]
 
 
 def _report(result: Any, as_json: bool, episode: dict[str, Any]) -> None:
@@ -98,45 +157,31 @@ def _exit(result: Any, stop: Any) -> None:
 
 
 def _run(
-    ctx: typer.Context,
-    store: Any,
-    plan: Any,
-    goal: Any,
-    options: Any,
-    model_id: Any,
-    level: Any,
-    seed: int,
-    settings: Any,
-    workers: int,
-    stop: Any,
-    as_json: bool,
-    planner: Any = None,
+    store: Any, plan: Any, goal: Any, planner: Any, level: Any, seed: int, settings: Any, as_json: bool
 ) -> Any:
-    """Create the episode, lay the world out and run it; the result."""
-    from twisted.experiments.episodes import Episode, ModelPlanner
+    """Create the episode, lay the world out and run it with ``planner`` (closed when done); the result."""
+    from twisted.experiments.episodes import Episode
     from twisted.store.episodes import create_episode
     from twisted.world import SimWorld
 
     world = SimWorld(level, seed)
-    parameters = {"drift_m": settings.drift_m, "workers": workers, "level": level.to_dict()}
-    run_id = create_episode(
-        store,
-        parameters,
-        plan_run_id=plan.run_id,
-        goal_knot=goal.knot_label or goal.spec,
-        level=level.name,
-        level_ranges=level.to_dict(),
-        world_seed=seed,
-        physics=world.physics.to_dict(),
-        closed_loop=settings.closed_loop,
-        timeout_s=settings.timeout_s,
-        max_actions=settings.max_actions,
-    )
-    if planner is None:
-        planner = ModelPlanner(store, goal, options, model_id, workers, run_id, stop)
-    planner.episode_run_id = run_id
+    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
     try:
-        episode = Episode(store, run_id, world, goal, planner, settings, stop, _progress(as_json))
+        run_id = create_episode(
+            store,
+            parameters,
+            plan_run_id=plan.run_id,
+            goal_knot=goal.knot_label or goal.spec,
+            level=level.name,
+            level_ranges=level.to_dict(),
+            world_seed=seed,
+            physics=world.physics.to_dict(),
+            closed_loop=settings.closed_loop,
+            timeout_s=settings.timeout_s,
+            max_actions=settings.max_actions,
+        )
+        planner.episode_run_id = run_id
+        episode = Episode(store, run_id, world, goal, planner, settings, planner.stop, _progress(as_json))
         return episode.run(episode.begin(plan))
     finally:
         planner.close()
@@ -151,18 +196,12 @@ def _progress(as_json: bool) -> Any:
 
 
 @app.command("execute")
+@with_world_options
 def execute_command(
     ctx: typer.Context,
     run_id: int | None = typer.Argument(
         None, metavar="RUN_ID", help="A solved planner run.", show_default=False
     ),
-    world: str = _OPT["world"],
-    seed: int = _OPT["seed"],
-    closed_loop: bool = _OPT["closed_loop"],
-    timeout_s: float = _OPT["timeout_s"],
-    max_actions: int = _OPT["max_actions"],
-    drift_m: float = _OPT["drift_m"],
-    workers: int = _OPT["workers"],
     resume: int | None = typer.Option(
         None,
         "--resume",
@@ -170,9 +209,11 @@ def execute_command(
         help="Continue a stopped episode from its last stored observation.",
     ),
     as_json: bool = json_option("the episode's outcome"),
+    *,
+    world: WorldRequest,
 ) -> None:
     """Execute a solved run's plan in a world apart from the planner's model; store the episode."""
-    from twisted.experiments.episodes import EpisodeSettings
+    from twisted.experiments.episodes import ModelPlanner
     from twisted.runtime import StopSignals
 
     if resume is not None:
@@ -184,18 +225,17 @@ def execute_command(
         fail(
             "RUN_ID is required: a solved planner run (`twisted plan ...` prints its id), or --resume EPISODE"
         )
-    level = _level(world)
-    _check_budget(timeout_s, max_actions, drift_m, workers)
-    settings = EpisodeSettings(closed_loop, timeout_s, max_actions, drift_m)
+    level, settings = world.check()
     store = open_db(ctx, needed_by=f"RUN_ID {run_id}")
     plan, goal, options, model_id = _stored_plan(store, run_id)
     stop = StopSignals()
     with stop.installed():
-        result = _run(
-            ctx, store, plan, goal, options, model_id, level, seed, settings, workers, stop, as_json
-        )
+        planner = ModelPlanner(store, goal, options, model_id, world.workers, None, stop)
+        result = _run(store, plan, goal, planner, level, world.seed, settings, as_json)
     _report(
-        result, as_json, {"plan_run": run_id, "level": level.name, "seed": seed, "closed_loop": closed_loop}
+        result,
+        as_json,
+        {"plan_run": run_id, "level": level.name, "seed": world.seed, "closed_loop": world.closed_loop},
     )
     _exit(result, stop)
 
@@ -277,43 +317,37 @@ def _episode_parameters(store: Any, episode_id: int) -> dict[str, Any]:
 
 
 @app.command("tie")
+@with_world_options
 def tie_command(
     ctx: typer.Context,
     knot: str = typer.Option(
         ..., "--knot", help="The knot to tie (overhand, figure-eight, 5_2, granny, ...)."
     ),
-    world: str = _OPT["world"],
-    seed: int = _OPT["seed"],
-    closed_loop: bool = _OPT["closed_loop"],
-    timeout_s: float = _OPT["timeout_s"],
-    max_actions: int = _OPT["max_actions"],
-    drift_m: float = _OPT["drift_m"],
-    workers: int = _OPT["workers"],
     planner_seed: int = typer.Option(0, "--planner-seed", min=0, max=2**63 - 1, help="Seed of the searches."),
     as_json: bool = json_option("the episode's outcome"),
+    *,
+    world: WorldRequest,
 ) -> None:
     """Plan KNOT in the model from the straight rope (with the pull test), then execute it in a world."""
     import time
 
-    from twisted.experiments.episodes import EpisodeSettings, ModelPlanner, plan_of_run
+    from twisted.experiments.episodes import ModelPlanner, plan_of_run
     from twisted.planner import PlanInputError, planner_options
     from twisted.planner.untie import make_any_goal
     from twisted.runtime import StopSignals
 
-    level = _level(world)
-    _check_budget(timeout_s, max_actions, drift_m, workers)
+    level, settings = world.check()
     try:
         goal = make_any_goal(None, knot, None)
         options = planner_options({"tighten": True, "seed": planner_seed})
     except PlanInputError as exc:
         fail(f"--knot {knot}: {exc}")
-    settings = EpisodeSettings(closed_loop, timeout_s, max_actions, drift_m)
     store = open_db(ctx)
     stop = StopSignals()
     with stop.installed():
-        planner = ModelPlanner(store, goal, options, None, workers, None, stop)
+        planner = ModelPlanner(store, goal, options, None, world.workers, None, stop)
         started = time.perf_counter()
-        plan_run, solved = planner.search(None, planner_seed, timeout_s)
+        plan_run, solved = planner.search(None, planner_seed, world.timeout_s)
         planning_s = time.perf_counter() - started
         if not solved:
             planner.close()
@@ -324,20 +358,10 @@ def tie_command(
         if not as_json:
             err_console.print(f"planned in the model: run {plan_run} in {planning_s:.1f} s", highlight=False)
         plan = plan_of_run(store, plan_run)
-        settings.timeout_s = max(timeout_s - planning_s, 1.0)
-        result = _run(
-            ctx, store, plan, goal, options, None, level, seed, settings, workers, stop, as_json, planner
-        )
+        settings.timeout_s = max(world.timeout_s - planning_s, 1.0)
+        result = _run(store, plan, goal, planner, level, world.seed, settings, as_json)
+    shown = {"knot": knot, "plan_run": plan_run, "model_planning_s": round(planning_s, 3)}
     _report(
-        result,
-        as_json,
-        {
-            "knot": knot,
-            "plan_run": plan_run,
-            "model_planning_s": round(planning_s, 3),
-            "level": level.name,
-            "seed": seed,
-            "closed_loop": closed_loop,
-        },
+        result, as_json, {**shown, "level": level.name, "seed": world.seed, "closed_loop": world.closed_loop}
     )
     _exit(result, stop)

@@ -41,6 +41,9 @@ DEFAULT_DRIFT_M = 0.05
 DEFAULT_MAX_ACTIONS = 30
 # A rope that keeps failing the pull test while it looks tied (the pull itself fails) is not pulled forever.
 MAX_PULLS = 3
+# What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
+# camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
+FIT_IN_GOAL = "the fit is in the goal"
 
 
 @dataclass(frozen=True)
@@ -166,7 +169,7 @@ class ModelPlanner:
         q, fitted_points, p_data = rest
         if p_data in self.goal:
             # the fit of a goal state: nothing to plan (the episode pulls the rope)
-            return Replan(None, None, time.perf_counter() - started, fit.residual_m, "the fit is in the goal")
+            return Replan(None, None, time.perf_counter() - started, fit.residual_m, FIT_IN_GOAL)
         with self.store.session(write=True) as session:
             configuration = add_configuration(
                 session, run_id=self.episode_run_id, p_data=p_data, q=q, points=fitted_points
@@ -202,6 +205,7 @@ class EpisodeState:
     elapsed_s: float = 0.0
     replan_runs: list[int] = field(default_factory=list)
     pulls: int = 0
+    fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
 
 
 @dataclass
@@ -325,7 +329,9 @@ class Episode:
                 return "out_of_budget", knot
             observed = _observed(state.points)
             plan_done = state.plan is None or state.position >= len(state.plan.steps)
-            if (observed is not None and observed in self.goal) if s.closed_loop else plan_done:
+            in_goal = state.fit_in_goal or (observed is not None and observed in self.goal)
+            if in_goal if s.closed_loop else plan_done:
+                state.fit_in_goal = False
                 knot = self._pull(state)
                 if self.goal.tightened_ties(knot):
                     return "tied", knot
@@ -382,7 +388,8 @@ class Episode:
             plan_run_id=None if replanned.plan is None else replanned.plan.run_id,
             plan_step=0,
         )
-        if replanned.run_id is None and replanned.reason != "the fit is in the goal":
+        state.fit_in_goal = replanned.reason == FIT_IN_GOAL
+        if replanned.run_id is None and not state.fit_in_goal:
             return "lost"
         return None
 
@@ -447,5 +454,6 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         elapsed_s=float(last.elapsed_s),
         replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
+        fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
     )
     return state, dict(last_seen.world_checkpoint)

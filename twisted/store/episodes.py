@@ -20,7 +20,7 @@ Like the rest of the store this module knows no simulator: arrays, numbers and J
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -139,6 +139,11 @@ class StepRecord:
     world_checkpoint: dict[str, Any] | None = None
 
 
+# the StepRecord fields stored as they are (the curve has four columns, the points a BLOB)
+CURVE_COLUMNS = ("link", "z_max_m", "x_m", "y_m")
+PLAIN_COLUMNS = tuple(f.name for f in fields(StepRecord) if f.name not in ("curve", "points"))
+
+
 @dataclass
 class StoredEpisode:
     """An episode as stored, its steps in order (checked: a stored row is input like any other)."""
@@ -171,32 +176,13 @@ def add_step(store: Any, episode_id: int, step: StepRecord, counters: dict[str, 
     ``elapsed_s``) in the same transaction, so that a killed episode's row agrees with its steps."""
     with store.session(write=True) as session:
         seq = session.scalar(select(func.count(EpisodeStep.id)).where(EpisodeStep.episode_id == episode_id))
-        curve = step.curve or (None, None, None, None)
-        session.add(
-            EpisodeStep(
-                episode_id=episode_id,
-                seq=int(seq or 0),
-                kind=step.kind,
-                link=curve[0],
-                z_max_m=curve[1],
-                x_m=curve[2],
-                y_m=curve[3],
-                points=None if step.points is None else array_to_blob(step.points),
-                observed_key=step.observed_key,
-                expected_key=step.expected_key,
-                drift_m=step.drift_m,
-                fit_residual_m=step.fit_residual_m,
-                fault=step.fault,
-                knot=step.knot,
-                replan_run_id=step.replan_run_id,
-                planning_s=step.planning_s,
-                plan_run_id=step.plan_run_id,
-                plan_step=step.plan_step,
-                world_checkpoint=step.world_checkpoint,
-                elapsed_s=step.elapsed_s,
-                created_at=utcnow(),
-            )
-        )
+        curve = dict(zip(CURVE_COLUMNS, step.curve or (None, None, None, None), strict=True))
+        plain = {name: getattr(step, name) for name in PLAIN_COLUMNS}
+        points = None if step.points is None else array_to_blob(step.points)
+        row = EpisodeStep(episode_id=episode_id, seq=int(seq or 0), points=points, created_at=utcnow())
+        for name, value in {**curve, **plain}.items():
+            setattr(row, name, value)
+        session.add(row)
         session.execute(update(EpisodeRow).where(EpisodeRow.run_id == episode_id).values(**counters))
         session.execute(update(Run).where(Run.id == episode_id).values(wall_seconds=step.elapsed_s))
 
@@ -241,23 +227,10 @@ def _checked_step(row: EpisodeStep) -> StepRecord:
         if any(v is None for v in values):
             raise EpisodeError(f"episode {row.episode_id} step {row.seq}: a curve step without its curve")
         curve = (int(row.link or 0), float(row.z_max_m or 0), float(row.x_m or 0), float(row.y_m or 0))
-    return StepRecord(
-        kind=row.kind,
-        elapsed_s=float(row.elapsed_s),
-        curve=curve,
-        points=points,
-        observed_key=row.observed_key,
-        expected_key=row.expected_key,
-        drift_m=row.drift_m,
-        fit_residual_m=row.fit_residual_m,
-        fault=row.fault,
-        knot=row.knot,
-        replan_run_id=row.replan_run_id,
-        planning_s=row.planning_s,
-        plan_run_id=row.plan_run_id,
-        plan_step=row.plan_step,
-        world_checkpoint=row.world_checkpoint if isinstance(row.world_checkpoint, dict) else None,
-    )
+    record = StepRecord(**{name: getattr(row, name) for name in PLAIN_COLUMNS}, curve=curve, points=points)
+    if not isinstance(record.world_checkpoint, dict):
+        record.world_checkpoint = None
+    return record
 
 
 def load_episode(store: Any, episode_id: int) -> StoredEpisode:
