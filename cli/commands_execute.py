@@ -17,7 +17,7 @@ import functools
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 
@@ -159,30 +159,11 @@ def _exit(result: Any, stop: Any) -> None:
 def _run(
     store: Any, plan: Any, goal: Any, planner: Any, level: Any, seed: int, settings: Any, as_json: bool
 ) -> Any:
-    """Create the episode, lay the world out and run it with ``planner`` (closed when done); the result."""
-    from twisted.experiments.episodes import Episode
-    from twisted.store.episodes import create_episode
-    from twisted.world import SimWorld
+    """One episode at ``level`` from ``seed`` (:func:`run_episode`); ``planner`` is closed afterwards."""
+    from twisted.experiments.episodes import run_episode
 
-    world = SimWorld(level, seed)
-    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
     try:
-        run_id = create_episode(
-            store,
-            parameters,
-            plan_run_id=plan.run_id,
-            goal_knot=goal.knot_label or goal.spec,
-            level=level.name,
-            level_ranges=level.to_dict(),
-            world_seed=seed,
-            physics=world.physics.to_dict(),
-            closed_loop=settings.closed_loop,
-            timeout_s=settings.timeout_s,
-            max_actions=settings.max_actions,
-        )
-        planner.episode_run_id = run_id
-        episode = Episode(store, run_id, world, goal, planner, settings, planner.stop, _progress(as_json))
-        return episode.run(episode.begin(plan))
+        return run_episode(store, plan, goal, planner, level, seed, settings, _progress(as_json))
     finally:
         planner.close()
 
@@ -365,3 +346,71 @@ def tie_command(
         result, as_json, {**shown, "level": level.name, "seed": world.seed, "closed_loop": world.closed_loop}
     )
     _exit(result, stop)
+
+
+@app.command("robustness")
+@with_world_options
+def robustness_command(
+    ctx: typer.Context,
+    knots: Annotated[
+        list[str], typer.Option("--knot", help="A knot to tie (repeatable): overhand, figure-eight, ...")
+    ],
+    levels: str = typer.Option(
+        "none,mild,moderate,strong", "--levels", help="Perturbation levels, comma-separated (no overrides)."
+    ),
+    draws: int = typer.Option(
+        3, "--draws", min=1, max=10_000, help="World draws (seeds --seed ...) per level."
+    ),
+    loops: str = typer.Option("open,closed", "--loops", help="open, closed or both (open,closed)."),
+    as_json: bool = json_option("the table"),
+    *,
+    world: WorldRequest,
+) -> None:
+    """Tie each knot in DRAWS worlds at each level, open and closed loop; print success per level.
+
+    Each knot is planned once in the model (a stored solved run of the same knot and options is reused);
+    episodes already finished in the store are skipped, so the same command continues after a stop.
+    `twisted report` plots the success against the level. `--world` is not taken: use --levels."""
+    from twisted.experiments.robustness import robustness_markdown, robustness_table, run_robustness
+    from twisted.planner import PlanInputError
+    from twisted.planner.untie import make_any_goal
+    from twisted.runtime import StopSignals
+
+    chosen = [_level(name.strip()) for name in levels.split(",")]
+    if any("," in name for name in levels.split(",")) or len({lv.name for lv in chosen}) != len(chosen):
+        fail(f"--levels {levels}: name each level once")
+    wanted = [part.strip() for part in loops.split(",")]
+    if not wanted or set(wanted) - {"open", "closed"} or len(set(wanted)) != len(wanted):
+        fail(f"--loops {loops}: give open, closed or open,closed")
+    _, settings = world.check()
+    for knot in knots:
+        try:
+            make_any_goal(None, knot, None)
+        except PlanInputError as exc:
+            fail(f"--knot {knot}: {exc}")
+    seeds = list(range(world.seed, world.seed + draws))
+    store = open_db(ctx)
+    stop = StopSignals()
+    with stop.installed():
+        try:
+            run_robustness(
+                store,
+                knots,
+                chosen,
+                seeds,
+                [w == "closed" for w in wanted],
+                settings,
+                world.workers,
+                stop,
+                _progress(as_json),
+            )
+        except PlanInputError as exc:
+            err_console.print(str(exc), highlight=False)
+            raise typer.Exit(EXIT_NOT_REACHED) from None
+    table = robustness_table(store)
+    if as_json:
+        print_json([row.to_dict() for row in table])
+    else:
+        console.print("\n".join(robustness_markdown(table)), highlight=False)
+    if stop():
+        raise typer.Exit(stop.exit_code)

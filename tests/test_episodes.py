@@ -17,6 +17,7 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
+from twisted.experiments.robustness import FINISHED, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
@@ -220,3 +221,44 @@ def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple
     assert _observations(db, episode_id) == _observations(db, whole["episode"])
     code, out = _execute(db, "--resume", str(episode_id))
     assert code == 2 and "has ended" in out
+
+
+def test_report_tables_and_plots_the_episodes_by_level(planned: tuple[str, int], tmp_path: Path) -> None:
+    db, run_id = planned
+    for level in ("none", "strong"):
+        code, out = _execute(db, str(run_id), "--world", level, "--seed", "11", "--json")
+        assert code in (0, 3), out
+    with open_store(db) as store:
+        table = {(r.level, r.closed_loop): r for r in robustness_table(store)}
+        finished = [o for o in load_levels(store) if o[1] in FINISHED]
+    assert {("none", False), ("strong", False)} <= set(table)
+    assert sum(r.episodes for r in table.values()) == len(finished)
+    assert table[("none", False)].tied >= 1  # the model's own rope ties what the model planned
+    result = runner.invoke(app, ["--db", db, "report", "--out", str(tmp_path / "report")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "report" / "robustness.png").stat().st_size > 0
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Robustness" in text and "| 0_1 | none | open |" in text
+
+
+def load_levels(store: Any) -> list[tuple[str, str]]:
+    with store.session() as session:
+        return [(r.level, r.outcome) for r in session.execute(select(EpisodeRow.level, EpisodeRow.outcome))]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--levels", "moderate,hurricane"],
+        ["--levels", "moderate,moderate"],
+        ["--loops", "sideways"],
+        ["--knot", "granny-knot-of-doom"],
+        ["--drift", "-1"],
+    ],
+)
+def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path, args: list[str]) -> None:
+    new = tmp_path / "new.db"
+    knot = [] if "--knot" in args else ["--knot", "overhand"]
+    result = runner.invoke(app, ["--db", f"sqlite:///{new}", "robustness", *knot, *args])
+    assert result.exit_code == 2, result.output
+    assert not new.exists()

@@ -425,6 +425,42 @@ class Episode:
         )
 
 
+def run_episode(
+    store: Any,
+    plan: Plan,
+    goal: Goal,
+    planner: ModelPlanner,
+    level: Any,
+    seed: int,
+    settings: EpisodeSettings,
+    progress: Callable[[str], None] | None = None,
+) -> EpisodeResult:
+    """A new episode: the world drawn at ``level`` from ``seed`` (:class:`twisted.world.SimWorld`), its row
+    stored, the rope laid out as ``plan``'s root, then :meth:`Episode.run`."""
+    from twisted.store.episodes import create_episode
+    from twisted.world import SimWorld
+
+    world = SimWorld(level, seed)
+    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
+    run_id = create_episode(
+        store,
+        parameters,
+        plan_run_id=plan.run_id,
+        goal_knot=goal.knot_label or goal.spec,
+        level=level.name,
+        level_ranges=level.to_dict(),
+        world_seed=seed,
+        physics=world.physics.to_dict(),
+        closed_loop=settings.closed_loop,
+        timeout_s=settings.timeout_s,
+        max_actions=settings.max_actions,
+    )
+    planner.episode_run_id = run_id
+    stop = planner.stop or (lambda: False)
+    episode = Episode(store, run_id, world, goal, planner, settings, stop, progress)
+    return episode.run(episode.begin(plan))
+
+
 def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
     """Where a stopped episode stood after its last stored step, and the world's checkpoint to restore.
 
