@@ -262,3 +262,22 @@ def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path,
     result = runner.invoke(app, ["--db", f"sqlite:///{new}", "robustness", *knot, *args])
     assert result.exit_code == 2, result.output
     assert not new.exists()
+
+
+def test_the_browse_query_lists_an_episode_as_its_observed_ropes(planned: tuple[str, int]) -> None:
+    import sqlite3
+
+    from twisted.browse.queries import EPISODE, QUERIES
+
+    db, run_id = planned
+    code, out = _execute(db, str(run_id), "--world", "mild", "--seed", "2", "--json")
+    assert code in (0, 3), out
+    episode = json.loads(out)["episode"]
+    assert QUERIES["episode"]["sql"] == EPISODE
+    with sqlite3.connect(db.removeprefix("sqlite:///")) as conn:
+        cursor = conn.execute(EPISODE, {"episode": episode, "page": ""})
+        columns = [c[0] for c in cursor.description]
+        rows = cursor.fetchall()
+    assert {"state", "points", "kind", "expected_key"} <= set(columns)
+    assert [r[columns.index("kind")] for r in rows][0] == "reset"
+    assert all(r[columns.index("points")] is not None for r in rows if r[columns.index("kind")] != "replan")
