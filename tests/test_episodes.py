@@ -281,3 +281,50 @@ def test_the_browse_query_lists_an_episode_as_its_observed_ropes(planned: tuple[
     assert {"state", "points", "kind", "expected_key"} <= set(columns)
     assert [r[columns.index("kind")] for r in rows][0] == "reset"
     assert all(r[columns.index("points")] is not None for r in rows if r[columns.index("kind")] != "replan")
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_an_episode_with_exit_130_and_it_resumes(planned: tuple[str, int]) -> None:
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    db, run_id = planned
+    path = db.removeprefix("sqlite:///")
+    with sqlite3.connect(path) as conn:
+        before = conn.execute("SELECT COALESCE(MAX(run_id), 0) FROM episodes").fetchone()[0]
+    # a drift of 1 mm: every action is off plan, so the episode replans (and runs long enough to stop)
+    args = ["--db", db, "execute", str(run_id), "--world", "strong", "--seed", "3", "--closed-loop"]
+    budget = ["--drift", "0.001", "--timeout", "30", "--json"]  # the resumed episode keeps the budget
+    command = [sys.executable, "-c", "from cli.main import run; run()", *args, *budget]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        steps = 0
+        while steps < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            with sqlite3.connect(path, timeout=5) as conn:
+                steps = conn.execute(
+                    "SELECT COUNT(*) FROM episode_steps WHERE episode_id > ?", (before,)
+                ).fetchone()[0]
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    stopped = json.loads(out)
+    assert stopped["outcome"] == "interrupted" and "--resume" in err
+    episode = stopped["episode"]
+    with open_store(db) as store:
+        kept = len(load_episode(store, episode).steps)
+    code, out = _execute(db, "--resume", str(episode), "--json")
+    assert code in (0, 3), out
+    resumed = json.loads(out)
+    assert resumed["episode"] == episode and resumed["outcome"] != "interrupted"
+    with open_store(db) as store:
+        steps_after = load_episode(store, episode).steps
+    assert len(steps_after) > kept and resumed["actions"] >= stopped["actions"]
