@@ -163,7 +163,7 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
     planner = SeenByPlanner(store, goal, options, None, 1, episode_id)
     planner.given = []
     # a drift of 1 mm: every action is off plan, so the episode replans after each one
-    settings = EpisodeSettings(closed_loop=True, timeout_s=120.0, max_actions=4, drift_m=0.001)
+    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=2, drift_m=0.001)
     try:
         episode = Episode(store, episode_id, world, goal, planner, settings)
         result = episode.run(episode.begin(plan))
