@@ -198,8 +198,15 @@ def execute_command(
     from twisted.runtime import StopSignals
 
     if resume is not None:
-        if run_id is not None:
-            fail(f"--resume {resume} continues an episode as it was asked: drop RUN_ID {run_id}")
+        # an option typed on the command line (Typer's own click: compare the source by name)
+        given = [
+            n for n in _WORLD_OPTIONS if getattr(ctx.get_parameter_source(n), "name", "") == "COMMANDLINE"
+        ]
+        if run_id is not None or given:
+            dropped = ([f"RUN_ID {run_id}"] if run_id is not None else []) + [
+                "--" + n.removesuffix("_s").removesuffix("_m").replace("_", "-") for n in given
+            ]
+            fail(f"--resume {resume} continues an episode as it was asked: drop {', '.join(dropped)}")
         _resume(ctx, resume, as_json)
         return
     if run_id is None:

@@ -221,6 +221,8 @@ def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple
     assert _observations(db, episode_id) == _observations(db, whole["episode"])
     code, out = _execute(db, "--resume", str(episode_id))
     assert code == 2 and "has ended" in out
+    code, out = _execute(db, "--resume", str(episode_id), "--world", "none")
+    assert code == 2 and "drop --world" in out
 
 
 def test_report_tables_and_plots_the_episodes_by_level(planned: tuple[str, int], tmp_path: Path) -> None:
