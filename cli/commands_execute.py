@@ -316,39 +316,38 @@ def tie_command(
     *,
     world: WorldRequest,
 ) -> None:
-    """Plan KNOT in the model from the straight rope (with the pull test), then execute it in a world."""
-    import time
+    """Plan KNOT in the model from the straight rope (with the pull test), then execute it in a world.
 
-    from twisted.experiments.episodes import ModelPlanner, plan_of_run
-    from twisted.planner import PlanInputError, planner_options
+    A solved plan of the same knot and options already in the store is executed again (no search)."""
+    from twisted.experiments.episodes import ModelPlanner
+    from twisted.experiments.robustness import model_plan
+    from twisted.planner import PlanInputError
     from twisted.planner.untie import make_any_goal
     from twisted.runtime import StopSignals
 
     level, settings = world.check()
     try:
-        goal = make_any_goal(None, knot, None)
-        options = planner_options({"tighten": True, "seed": planner_seed})
+        make_any_goal(None, knot, None)
     except PlanInputError as exc:
         fail(f"--knot {knot}: {exc}")
     store = open_db(ctx)
     stop = StopSignals()
     with stop.installed():
-        planner = ModelPlanner(store, goal, options, None, world.workers, None, stop)
-        started = time.perf_counter()
-        plan_run, solved = planner.search(None, planner_seed, world.timeout_s)
-        planning_s = time.perf_counter() - started
-        if not solved:
-            planner.close()
-            err_console.print(
-                f"the model found no plan in {planning_s:.1f} s (run {plan_run})", highlight=False
+        try:
+            plan, goal, options, planning_s = model_plan(
+                store, knot, planner_seed, world.timeout_s, world.workers, stop
             )
-            raise typer.Exit(stop.exit_code if stop() else EXIT_NOT_REACHED)
+        except PlanInputError as exc:
+            err_console.print(str(exc), highlight=False)
+            raise typer.Exit(stop.exit_code if stop() else EXIT_NOT_REACHED) from None
         if not as_json:
-            err_console.print(f"planned in the model: run {plan_run} in {planning_s:.1f} s", highlight=False)
-        plan = plan_of_run(store, plan_run)
+            err_console.print(
+                f"the model's plan: run {plan.run_id} ({planning_s:.1f} s of search)", highlight=False
+            )
         settings.timeout_s = max(world.timeout_s - planning_s, 1.0)
+        planner = ModelPlanner(store, goal, options, None, world.workers, None, stop)
         result = _run(store, plan, goal, planner, level, world.seed, settings, as_json)
-    shown = {"knot": knot, "plan_run": plan_run, "model_planning_s": round(planning_s, 3)}
+    shown = {"knot": knot, "plan_run": plan.run_id, "model_planning_s": round(planning_s, 3)}
     _report(
         result, as_json, {**shown, "level": level.name, "seed": world.seed, "closed_loop": world.closed_loop}
     )

@@ -144,3 +144,17 @@ def test_fitting_noisy_points_stays_within_the_noise() -> None:
     assert result.residual_m < 4 * LEVELS["moderate"].observation_noise_m
     rest = ChainFit().at_rest(result)
     assert rest is not None and rest[2] == observed_p_data(world.true_points())
+
+
+def test_a_fit_pressed_through_a_strand_is_stretched_until_the_model_takes_it() -> None:
+    sim = RopeSim()
+    assert sim.apply(Curve(2, 0.0308, 0.4662, 0.0664)).ok  # one crossing, the head over
+    points = sim.link_points()
+    crossing = observed_p_data(points)
+    assert crossing.cross == 1
+    pressed = points.copy()
+    pressed[pressed[:, 2] > 0.015, 2] = 0.016  # the upper strand seen 6 mm above the lower one's centre
+    fit = ChainFit()
+    assert fit.at_rest(fit.fit(pressed)) is None  # 14 mm into the lower strand: rejected
+    first, rest = fit.rest_configuration(pressed)
+    assert first.residual_m > 0 and rest is not None and rest[2] == crossing

@@ -158,10 +158,9 @@ class ModelPlanner:
         if self._fit is None:
             self._fit = ChainFit()
         try:
-            fit = self._fit.fit(points)
+            fit, rest = self._fit.rest_configuration(points)
         except ValueError as exc:
             return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}")
-        rest = self._fit.at_rest(fit)
         if rest is None:
             return Replan(
                 None, None, time.perf_counter() - started, fit.residual_m, "the model rejects the fit"

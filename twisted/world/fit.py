@@ -30,6 +30,12 @@ from twisted.topology import PData, top
 FloatArray = npt.NDArray[np.float64]
 
 ROLL_GRID = 36  # roll candidates of the middle link, 10 degrees apart
+HEIGHT_STRETCHES = (
+    1.0,
+    1.5,
+    2.0,
+    3.0,
+)  # tried in turn when a fit is pressed through a strand (rest_configuration)
 TABLE_GIVE_M = 0.002  # how far under one radius a resting rope's centreline may be seen before it is raised
 
 
@@ -139,6 +145,29 @@ class ChainFit:
         fitted = self.sim.link_points()
         residual = float(np.sqrt(np.mean(np.sum((fitted - observed) ** 2, axis=1))))
         return Fit(q, fitted, residual)
+
+    def rest_configuration(
+        self, points: npt.ArrayLike
+    ) -> tuple[Fit, tuple[FloatArray, FloatArray, PData] | None]:
+        """The fit of ``points`` and its configuration at rest in the model (:meth:`at_rest`).
+
+        A chain fitted through noisy points can press one strand more than a radius into another where
+        they cross, which the model rejects; then the heights above the resting height are stretched
+        (x1.5, x2, x3: which strand is over stays over) and fitted again, and the model lets the rope
+        fall back when it rests. The fit returned is that of the points as observed."""
+        p = np.asarray(points, dtype=np.float64)
+        first = self.fit(p)
+        floor = self.sim.params.link_radius_m
+        for stretch in HEIGHT_STRETCHES:
+            fit = first
+            if stretch != 1.0:
+                stretched = p.copy()
+                stretched[:, 2] = floor + np.maximum(p[:, 2] - floor, 0.0) * stretch
+                fit = self.fit(stretched)
+            rest = self.at_rest(fit)
+            if rest is not None:
+                return first, rest
+        return first, None
 
     def at_rest(self, fit: Fit) -> tuple[FloatArray, FloatArray, PData] | None:
         """The fitted configuration let come to rest in the planner's model (the noise of the points may
