@@ -12,9 +12,11 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.parse
@@ -159,41 +161,59 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, int]:
     return path, result.run_id, collect_id
 
 
-@pytest.fixture(scope="module")
-def server(store: tuple[Path, int, int]) -> Iterator[tuple[str, subprocess.Popen[str], str]]:
-    """`twisted browse` on a free port: (base URL, the process, the file's digest before serving)."""
-    path = store[0]
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+def _start(url: str) -> tuple[str, subprocess.Popen[str]]:
+    """`twisted --db URL browse` on a free port, answering: (base URL, the process)."""
     port = _free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cli.main", "--db", f"sqlite:///{path}", "browse", "--port", str(port)],
+        [sys.executable, "-m", "cli.main", "--db", url, "browse", "--port", str(port)],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
     )
     base = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 120  # start-up on a busy machine; not a speed check
+    while True:
+        assert proc.poll() is None, proc.communicate()[0]
+        try:
+            # the port listens before the app is up (bound first): a request waits in its queue
+            with urllib.request.urlopen(f"{base}/-/versions.json", timeout=30):
+                return base, proc
+        except (urllib.error.URLError, ConnectionError, TimeoutError):
+            if time.monotonic() > deadline:
+                proc.kill()
+                raise AssertionError("twisted browse did not start") from None
+            time.sleep(0.3)
+
+
+def _stop(proc: subprocess.Popen[str]) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def server(store: tuple[Path, int, int]) -> Iterator[tuple[str, subprocess.Popen[str], str]]:
+    """`twisted browse` on a free port: (base URL, the process, the file's digest before serving)."""
+    path = store[0]
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    base, proc = _start(f"sqlite:///{path}")
     try:
-        deadline = time.monotonic() + 120  # start-up on a busy machine; not a speed check
-        while True:
-            assert proc.poll() is None, proc.communicate()[0]
-            try:
-                # the port listens before the app is up (bound first): a request waits in its queue
-                with urllib.request.urlopen(f"{base}/-/versions.json", timeout=30):
-                    break
-            except (urllib.error.URLError, ConnectionError, TimeoutError):
-                assert time.monotonic() < deadline, "twisted browse did not start"
-                time.sleep(0.3)
         yield base, proc, digest
     finally:
-        if proc.poll() is None:
-            proc.terminate()
-            proc.wait(timeout=60)
+        _stop(proc)
 
 
-def _get(url: str) -> tuple[int, str, bytes]:
+def _get(
+    url: str, data: bytes | None = None, headers: dict[str, str] | None = None
+) -> tuple[int, str, bytes]:
     try:
-        with urllib.request.urlopen(url, timeout=60) as response:
+        request = urllib.request.Request(url, data=data, headers=headers or {})
+        with urllib.request.urlopen(request, timeout=60) as response:
             return response.status, response.headers.get("Content-Type", ""), response.read()
     except urllib.error.HTTPError as exc:
         return exc.code, exc.headers.get("Content-Type", ""), exc.read()
@@ -279,3 +299,175 @@ def test_the_server_listens_on_localhost_only_reads_and_stops(server, store) -> 
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 143 and "stopped (SIGTERM)" in out, out
     assert hashlib.sha256(store[0].read_bytes()).hexdigest() == digest  # served read-only
+
+
+# ------------------------------------------------------------------ hostile stores and requests (issue 62)
+
+# '#' ends a file: URI's path, '?' starts its parameters, '%' escapes, ' ' is not allowed: written
+# unescaped after "file:", this name opens the file "odd " read-write (the decoy beside it)
+ODD_NAME = "odd #x?mode=rw&y= %41.db"
+DECOY = "odd "
+WRITES = [
+    "with x as (select 1) delete from runs",
+    "with x as (select 1) update runs set message = 'written'",
+    "with x as (select 1) insert into runs (kind, parameters, started_at, pid) select kind, parameters, "
+    "started_at, pid from runs",
+]
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _plant(path: Path, collect_id: int) -> None:
+    """A rope of 1,000 random links in the first planner node of the straight state, and a run's
+    parameters nested 200,000 deep."""
+    import sqlite3
+
+    conn = sqlite3.connect(path)
+    try:
+        (node_id,) = conn.execute(
+            "SELECT n.id FROM search_nodes n JOIN topological_states s ON s.id = n.state_id "
+            "WHERE s.key = '[]' ORDER BY n.id LIMIT 1"
+        ).fetchone()
+        rope = np.random.default_rng(0).uniform(-0.3, 0.3, (1001, 3)).astype("<f8")
+        conn.execute("UPDATE search_nodes SET points = ? WHERE id = ?", (rope.tobytes(), node_id))
+        deep = "[" * 200_000 + "]" * 200_000
+        conn.execute("UPDATE runs SET parameters = ? WHERE id = ?", (deep, collect_id))
+        conn.commit()
+    finally:
+        conn.close()
+
+
+@pytest.fixture(scope="module")
+def hostile(
+    store: tuple[Path, int, int], tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[tuple[str, subprocess.Popen[str], Path]]:
+    """The store copied under ODD_NAME with `_plant`'s rows, a decoy store beside it (the file an
+    unescaped URI would open), served: (base URL, the process, the file)."""
+    import shutil
+    import sqlite3
+
+    folder = tmp_path_factory.mktemp("odd")
+    path = folder / ODD_NAME
+    shutil.copyfile(store[0], path)
+    _plant(path, store[2])
+    shutil.copyfile(store[0], folder / DECOY)
+    with sqlite3.connect(folder / DECOY) as conn:
+        conn.execute("UPDATE runs SET message = 'decoy'")
+    conn.close()
+    base, proc = _start(f"sqlite:///{urllib.parse.quote(str(path))}")
+    try:
+        yield base, proc, path
+    finally:
+        _stop(proc)
+
+
+@pytest.mark.parametrize("name", ["a#b.db", "r.db?mode=rw&x=", "p%41 q.db", "sp ace.db"])
+def test_the_served_file_is_exactly_the_store_and_sqlite_refuses_writes(tmp_path: Path, name: str) -> None:
+    pytest.importorskip("datasette")
+    import sqlite3
+
+    from twisted.browse.server import DATABASE, datasette_app
+
+    path = tmp_path / name
+    for file in (path, tmp_path / "a", tmp_path / "r.db", tmp_path / "p"):  # the decoys first, if any
+        with sqlite3.connect(file) as conn:
+            conn.execute("CREATE TABLE runs (id INTEGER PRIMARY KEY, message TEXT)")
+            conn.execute("INSERT INTO runs (message) VALUES (?)", (file.name,))
+        conn.close()
+    digest = _digest(path)
+    conn = datasette_app(path, f"sqlite:///{path}").get_database(DATABASE).connect()
+    try:
+        assert conn.execute("SELECT message FROM runs").fetchall() == [(name,)]
+        assert conn.execute("PRAGMA query_only").fetchone() == (1,)
+        for sql in [*WRITES[:2], "with x as (select 1) insert into runs (message) values ('w')"]:
+            with pytest.raises(sqlite3.OperationalError, match="readonly|read-only"):
+                conn.execute(sql)
+    finally:
+        conn.close()
+    assert _digest(path) == digest
+
+
+def test_sql_that_writes_is_refused_and_nothing_is_written(hostile) -> None:
+    base, _, path = hostile
+    digests = _digest(path), _digest(path.parent / DECOY)
+    for sql in WRITES:
+        status, _, body = _get(f"{base}/twisted.json?{urllib.parse.urlencode({'sql': sql})}")
+        assert status == 400 and b"readonly" in body, (sql, status, body[:300])
+    assert (_digest(path), _digest(path.parent / DECOY)) == digests
+    runs = json.loads(_page(f"{base}/twisted/runs.json?_shape=array"))
+    assert runs and not any(run["message"] == "decoy" for run in runs)  # the store, not the decoy
+
+
+def test_a_planted_rope_is_not_drawn(hostile) -> None:
+    base, _, _ = hostile
+    status, _, html = _get(f"{base}/twisted/search_nodes?_size=5&_sort=id")
+    assert status == 200 and len(html) < 500_000  # was 66 MB for 1,000 links
+    status, _, body = _get(f"{base}/-/twisted/state.svg?key=[]")
+    assert status == 404 and b"not a rope of this store" in body and b"(1001, 3)" in body
+    plan_runs = json.loads(_page(f"{base}/twisted/search_runs.json?_shape=array&outcome=solved"))
+    status, _, body = _get(f"{base}/-/twisted/runs/{plan_runs[0]['run_id']}/plan.png")
+    assert status == 404 and b"not a rope of this store" in body
+
+
+def test_parameters_nested_deep_are_shown_as_text(hostile, store) -> None:
+    base, _, _ = hostile
+    collect_id = store[2]
+    for page in ("/twisted/runs", f"/twisted/runs/{collect_id}", "/twisted/runs.json"):
+        status, _, body = _get(f"{base}{page}")
+        assert status == 200, (page, body[:300])
+    status, _, body = _get(f"{base}/twisted/runs.json?_json=parameters")  # Datasette parses the JSON
+    assert status == 400 and b"nested too deep" in body
+
+
+def test_only_get_on_localhost_and_known_pages_is_answered(hostile) -> None:
+    base, _, _ = hostile
+    port = base.rsplit(":", 1)[1]
+    for host in (f"127.0.0.1:{port}", f"localhost:{port}", "localhost"):
+        assert _get(f"{base}/twisted/runs", headers={"Host": host})[0] == 200, host
+    for host in ("evil.example", f"evil.example:{port}", "127.0.0.1:1", f"127.0.0.1.evil.example:{port}"):
+        status, _, body = _get(f"{base}/twisted/runs", headers={"Host": host})
+        assert status == 421 and b"is not served" in body, host
+    assert _get(f"{base}/twisted/runs", data=b"a=1")[0] == 405
+    assert _get(f"{base}/twisted/runs_tree?run_id=1", data=b"")[0] == 405
+    for page in ("/-/nope", "/-/twisted/nope", "/-/auth-token", "/_memory", "/_memory.json?sql=select+1"):
+        assert _get(f"{base}{page}")[0] == 404, page
+
+
+def test_the_server_prints_no_traceback(hostile) -> None:
+    _, proc, _ = hostile
+    _stop(proc)
+    out = proc.communicate()[0]
+    assert proc.returncode == 143 and "Traceback" not in out and "locals" not in out, out[-3000:]
+    assert len(out.splitlines()) <= 2 + len(WRITES), out  # the banner, one line per refused write, "stopped"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_stops_the_server_while_a_picture_is_drawn(hostile, signum: int) -> None:
+    """The planted rope's picture held the server for minutes (and SIGTERM / SIGINT with it)."""
+    _, _, path = hostile
+    base, proc = _start(f"sqlite:///{urllib.parse.quote(str(path))}")
+    try:
+        pending = threading.Thread(target=_get, args=(f"{base}/-/twisted/state.svg?key=[]",), daemon=True)
+        pending.start()
+        time.sleep(1.0)
+        proc.send_signal(signum)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        _stop(proc)
+    assert proc.returncode == 128 + signum and f"stopped ({signal.Signals(signum).name})" in out, out
+
+
+def test_a_picture_past_its_time_limit_is_refused(store) -> None:
+    pytest.importorskip("datasette")
+    import asyncio
+
+    from twisted.browse.plugin import draw_picture
+
+    path, plan_id, _ = store
+    url = f"sqlite:///{path}"
+    status, body, _ = asyncio.run(draw_picture(url, "plan", str(plan_id), "gif", 0.05))
+    assert status == 503 and b"time limit" in body
+    status, body, content_type = asyncio.run(draw_picture(url, "plan", str(plan_id), "png", 120))
+    assert status == 200 and content_type == "image/png" and body[:4] == b"\x89PNG"
