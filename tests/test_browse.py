@@ -143,9 +143,11 @@ def _free_port() -> int:
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, int]:
-    """(file, plan run id, collect run id): a solved planner run and a collected trefoil."""
+    """(file, plan run id, collect run id): a solved planner run with its pull test, a collected
+    trefoil, and a run that starts from the trefoil (`_untie_run`)."""
     pytest.importorskip("datasette")
     from twisted.planner import PlannerOptions, start_search
+    from twisted.planner.session import replay
     from twisted.sim import SimPool
 
     path = tmp_path_factory.mktemp("browse") / "store.db"
@@ -154,11 +156,37 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, int]:
             search = start_search(opened, ONE, PlannerOptions(planner="random-low", seed=0), pool)
             result = search.run(max_iterations=400)
         assert result.solved  # deterministic for this seed (tests/test_render.py)
+        replay(opened, result.run_id, tighten=True)  # the pull test `plan --tighten` stores
         rope = _trefoil_rope()
         with opened.session(write=True) as session:
             collect_id = start_run(session, "collect", {}).id
             add_configuration(session, run_id=collect_id, p_data=top(rope), q=np.zeros(4), points=rope)
+        _untie_run(opened, result.run_id)
     return path, result.run_id, collect_id
+
+
+def _untie_run(opened: object, from_run: int) -> int:
+    """A stored search that starts from the trefoil rope (as `untie` does from a run's end): its root and
+    one child keep the trefoil, one child is the straight rope."""
+    from twisted.goals import state_goal
+    from twisted.planner import Checkpoint, Node
+    from twisted.sim import Curve
+    from twisted.store.search import SearchRun
+
+    trefoil, straight = _trefoil_rope(), np.stack([np.arange(22) * 0.04, np.zeros(22), np.zeros(22)], axis=1)
+
+    def node(seq: int, parent: int | None, points: np.ndarray) -> Node:
+        curve = None if parent is None else Curve(3, 0.05, 0.1, 0.1)
+        return Node(seq, parent, np.zeros(8), points, top(points), curve, seq, seq, 0.01 * seq)
+
+    def checkpoint(iteration: int) -> Checkpoint:
+        return Checkpoint(iteration, 0.01 * iteration, iteration, {"seed": 0}, {})
+
+    parameters = {"planner": "random-low", "from_run": from_run, "both_ways": True}
+    root = node(0, None, trefoil)
+    recorder = SearchRun.create(opened, state_goal(top(straight)), parameters, root, checkpoint(0))
+    recorder.save([node(1, 0, trefoil + 0.001), node(2, 0, straight)], checkpoint(1))
+    return int(recorder.run_id)
 
 
 def _start(url: str) -> tuple[str, subprocess.Popen[str]]:
@@ -263,7 +291,8 @@ def test_the_knots_tied_query_shows_the_trefoil(server, store) -> None:
     states = _page(f"{base}/twisted/topological_states")
     assert urllib.parse.urlencode({"key": key}).replace("&", "&amp;") in states  # its link to the ropes
     reached = _page(f"{base}/twisted/state_reached_by?{urllib.parse.urlencode({'key': key})}")
-    assert reached.count('class="twisted-rope"') == 1 and f">{collect_id}</a>" in reached
+    # the collected trefoil and the two trefoil nodes of the run that starts from it
+    assert reached.count('class="twisted-rope"') == 3 and f">{collect_id}</a>" in reached
 
 
 def test_states_show_their_gauss_diagram_and_full_drawing(server) -> None:
@@ -284,21 +313,6 @@ def test_the_other_canned_queries_answer(server) -> None:
         status, _, body = _get(f"{base}/twisted/{name}")
         assert status == 200 and column in json.loads(body)["columns"]  # the SQL runs on this schema
     assert len(json.loads(_page(f"{base}/twisted/states_most_reached.json"))["rows"]) >= 3
-
-
-def test_the_server_listens_on_localhost_only_reads_and_stops(server, store) -> None:
-    base, proc, digest = server
-    port = int(base.rsplit(":", 1)[1])
-    tcp = Path("/proc/net/tcp")
-    if tcp.exists():  # Linux: the listening socket's local address is 127.0.0.1 (0100007F)
-        listening = [line.split()[1] for line in tcp.read_text().splitlines()[1:] if line.split()[3] == "0A"]
-        assert f"0100007F:{port:04X}" in listening
-        assert not any(a.endswith(f":{port:04X}") and a != f"0100007F:{port:04X}" for a in listening)
-    _page(f"{base}/twisted/search_nodes")
-    proc.terminate()
-    out, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 143 and "stopped (SIGTERM)" in out, out
-    assert hashlib.sha256(store[0].read_bytes()).hexdigest() == digest  # served read-only
 
 
 # ------------------------------------------------------------------ hostile stores and requests (issue 62)
@@ -471,3 +485,125 @@ def test_a_picture_past_its_time_limit_is_refused(store) -> None:
     assert status == 503 and b"time limit" in body
     status, body, content_type = asyncio.run(draw_picture(url, "plan", str(plan_id), "png", 120))
     assert status == 200 and content_type == "image/png" and body[:4] == b"\x89PNG"
+
+
+# ------------------------------------------------------------------ a run's story (issue 63 item 6)
+
+
+def _run_ids(base: str) -> dict[str, int]:
+    runs = json.loads(_page(f"{base}/twisted/runs.json?_shape=array&_sort=id"))
+    untie = [r["id"] for r in runs if '"from_run"' in (r["parameters"] or "")]
+    return {"untie": untie[0]}
+
+
+def test_the_front_page_lists_the_runs_first(server, store) -> None:
+    base, _, _ = server
+    _, plan_id, collect_id = store
+    html = _page(f"{base}/")
+    runs = html.index("Runs, newest first")
+    assert runs < html.index("Questions") < html.index("Tables")
+    untie_id = _run_ids(base)["untie"]
+    for run_id in (plan_id, collect_id, untie_id):
+        assert f'href="/-/twisted/runs/{run_id}"' in html
+    assert f"from run <a href=\"/-/twisted/runs/{plan_id}\">{plan_id}</a>" in html  # the untie run
+    assert "_memory" not in html and _get(f"{base}/_memory")[0] == 404
+    assert f"/twisted/run_tree?run_id={plan_id}" in html  # an example of the query that takes a run
+
+
+def test_a_run_page_tells_the_story_plan_first(server, store) -> None:
+    base, _, _ = server
+    path, plan_id, _ = store
+    html = _page(f"{base}/-/twisted/runs/{plan_id}")
+    for fact in ("<dt>goal</dt>", "<dt>outcome</dt><dd>solved</dd>", "simulator calls", "<dt>pull test</dt>"):
+        assert fact in html, fact
+    assert f'<img src="/-/twisted/runs/{plan_id}/plan.png"' in html
+    with open_store(f"sqlite:///{path}", readonly=True) as opened:
+        from twisted.store.search import solution_path
+
+        plan = solution_path(opened, plan_id)
+    marks = re.findall(r"<tr><td>(plan)?</td><td>(\d+)</td>", html)
+    assert [seq for mark, seq in marks[: len(plan)] if mark] == [str(n.seq) for n in plan]  # the plan first
+    assert not any(mark for mark, _ in marks[len(plan) :])
+    assert "next 50 nodes" not in html and "previous" in _page(f"{base}/-/twisted/runs/{plan_id}?page=2")
+    untie = _page(f"{base}/-/twisted/runs/{_run_ids(base)['untie']}")
+    assert f'the end of run <a href="/-/twisted/runs/{plan_id}">{plan_id}</a>' in untie
+    assert "<dt>knots tied</dt><dd>none</dd>" in untie  # the trefoil it started from is not tied
+    assert _get(f"{base}/-/twisted/runs/999999")[0] == 404
+
+
+def test_knots_tied_counts_what_a_run_tied_not_its_start(server, store) -> None:
+    base, _, _ = server
+    _, _, collect_id = store
+    untie_id = _run_ids(base)["untie"]
+    sql = urllib.parse.urlencode({"sql": "select distinct run_id from knots_tied order by run_id"})
+    view = json.loads(_page(f"{base}/twisted.json?{sql}&_shape=array"))  # the store's view credits the start
+    assert [r["run_id"] for r in view] == [collect_id, untie_id]
+    query = json.loads(_page(f"{base}/twisted/knots_tied.json?_shape=array"))
+    assert [r["run_id"] for r in query] == [collect_id]
+
+
+def test_every_canned_query_with_parameters_has_a_working_example(server) -> None:
+    from twisted.browse.queries import EXAMPLE_ROWS
+
+    base, _, _ = server
+    for name in EXAMPLE_ROWS:
+        html = _page(f"{base}/twisted/{name}")
+        found = re.search(r"Example: <a href='([^']+)'>", html)
+        if name == "eval_goals":  # this store has no eval results
+            assert found is None and "nothing to show here yet" in html
+            continue
+        assert found, name
+        address = found.group(1).replace(f"/twisted/{name}?", f"/twisted/{name}.json?")
+        assert json.loads(_page(base + address))["rows"], name
+
+
+def test_the_plan_picture_is_plan_pictures_and_the_gif_keeps_its_axes(store, monkeypatch, tmp_path) -> None:
+    from twisted.browse.draw import draw
+    from twisted.render import stored
+
+    path, plan_id, _ = store
+    limits: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    to_array = stored.figure_to_array
+
+    def keep_limits(fig, dpi=80):  # the real drawing; its axes' limits noted
+        limits.append((fig.axes[-1].get_xlim(), fig.axes[-1].get_ylim()))
+        return to_array(fig, dpi=dpi)
+
+    monkeypatch.setattr(stored, "figure_to_array", keep_limits)
+    with open_store(f"sqlite:///{path}", readonly=True) as opened:
+        draw(opened, tmp_path / "plan.gif", "plan", str(plan_id))
+        assert len(limits) >= 3 and len(set(limits)) == 1  # the rope does not jump between frames
+        draw(opened, tmp_path / "browser.png", "plan", str(plan_id))
+        stored.render_tightened(opened, plan_id, tmp_path / "plan-picture.png")  # what plan --picture draws
+    assert (tmp_path / "browser.png").read_bytes() == (tmp_path / "plan-picture.png").read_bytes()
+
+
+def test_no_link_of_the_story_pages_is_broken(server, store) -> None:
+    """Every link and picture of the front page and the run pages answers (bench/browse_page.py --crawl
+    opens the same pages, and the canned queries, in headless Chromium)."""
+    base, _, _ = server
+    runs = json.loads(_page(f"{base}/twisted/runs.json?_shape=array"))
+    pages = [f"{base}/", *(f"{base}/-/twisted/runs/{run['id']}" for run in runs)]
+    checked: dict[str, int] = {}
+    for page in pages:
+        for raw in re.findall(r'(?:href|src)="([^"#]+)"', _page(page)):
+            url = urllib.parse.urljoin(page, raw.replace("&amp;", "&"))
+            if url.startswith(base + "/") and url not in checked:
+                checked[url] = _get(url)[0]
+    assert len(checked) > 15 and {url: s for url, s in checked.items() if s != 200} == {}
+
+
+# the last test of the story server: it stops it
+def test_the_server_listens_on_localhost_only_reads_and_stops(server, store) -> None:
+    base, proc, digest = server
+    port = int(base.rsplit(":", 1)[1])
+    tcp = Path("/proc/net/tcp")
+    if tcp.exists():  # Linux: the listening socket's local address is 127.0.0.1 (0100007F)
+        listening = [line.split()[1] for line in tcp.read_text().splitlines()[1:] if line.split()[3] == "0A"]
+        assert f"0100007F:{port:04X}" in listening
+        assert not any(a.endswith(f":{port:04X}") and a != f"0100007F:{port:04X}" for a in listening)
+    _page(f"{base}/twisted/search_nodes")
+    proc.terminate()
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and "stopped (SIGTERM)" in out, out
+    assert hashlib.sha256(store[0].read_bytes()).hexdigest() == digest  # served read-only

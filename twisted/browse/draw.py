@@ -3,12 +3,13 @@
     python -m twisted.browse.draw DB_URL OUT state KEY
     python -m twisted.browse.draw DB_URL OUT plan RUN_ID
 
-writes ``OUT`` (``state``: ``render --goal`` as SVG; ``plan``: ``render --run`` as PNG, or as GIF when
-``OUT`` ends in ``.gif``) and exits 0, or prints why it cannot be drawn and exits 2. Every rope it
-draws is first checked against the rope profile (the store's link count, finite points), so a planted
-row of 1,000 links is refused instead of drawn. The server (:mod:`twisted.browse.plugin`) starts one
-child per picture and kills it past its time limit, so no picture can hold the server, and a signal
-that stops the server ends the drawing too.
+writes ``OUT`` and exits 0, or prints why it cannot be drawn and exits 2. ``state``: ``render --goal``
+as SVG. ``plan``: as PNG, the picture ``plan --picture`` draws (the run's final rope, beside the same
+rope pulled tight when it has a pull test); as GIF (``OUT`` ends in ``.gif``), the plan one frame a
+step, every frame on the same axes. Every rope it draws is first checked against the rope profile (the
+store's link count, finite points), so a planted row of 1,000 links is refused instead of drawn. The
+server (:mod:`twisted.browse.plugin`) starts one child per picture and kills it past its time limit,
+so no picture can hold the server, and a signal that stops the server ends the drawing too.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ def check_rope(points: Any, where: str) -> None:
 
 def draw(store: Any, out: Path, kind: str, arg: str) -> None:
     """Draw one picture (``state`` KEY or ``plan`` RUN_ID) into ``out``; RenderError when it cannot be."""
-    from twisted.render import RenderError, find_drawing, render_goal, render_run
+    from twisted.render import RenderError, find_drawing, render_goal, render_run, render_tightened
     from twisted.store.search import NoPlanError, solved_run
     from twisted.topology import PDataError, parse_p_data
 
@@ -61,10 +62,28 @@ def draw(store: Any, out: Path, kind: str, arg: str) -> None:
             raise RenderError(f"{exc}: nothing to draw") from None
         for node in path:
             check_rope(node.points, f"search node {node.id} of run {run_id}")
-        gif = out if out.suffix == ".gif" else None
-        render_run(store, run_id, out.with_suffix(".png"), gif, gl=False)
+        if out.suffix == ".gif":
+            render_run(store, run_id, out.with_suffix(".png"), out, gl=False)
+        elif _pull_test_points(store, run_id, path[-1].seq) is not None:  # what `plan --picture` draws
+            render_tightened(store, run_id, out)
+        else:
+            render_run(store, run_id, out, gl=False)
     else:
         raise RenderError(f"no picture of kind {kind!r}")
+
+
+def _pull_test_points(store: Any, run_id: int, final_seq: int) -> Any:
+    """The pulled-tight rope that :func:`twisted.render.render_tightened` would draw (checked against
+    the rope profile), or None when the run has no pull test."""
+    from twisted.store.knots import tightenings
+
+    with store.session() as session:
+        tests = [t for t in tightenings(session, run_id) if t.ok and t.points is not None]
+    tests = [t for t in tests if t.node_seq == final_seq] or tests
+    if not tests:
+        return None
+    check_rope(tests[-1].points, f"pull test {tests[-1].id} of run {run_id}")
+    return tests[-1].points
 
 
 def main(argv: list[str]) -> int:

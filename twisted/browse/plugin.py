@@ -33,11 +33,12 @@ from datasette import hookimpl
 from datasette.utils.asgi import Response
 from markupsafe import Markup, escape
 
+from twisted.browse import pages
+from twisted.browse.pages import stored_parameters
 from twisted.browse.queries import PLUGIN
 from twisted.browse.svg import gauss_svg, knot_words, p_data_of_cell, rope_svg
 
 _KNOT_COLUMNS = {"knot_type", "closure_under", "closure_over", "goal_knot", "knot_before", "knot_after"}
-_MAX_PARAMETERS_CHARS = 64_000  # a run's parameters are a few hundred characters
 _KEY_COLUMNS = {"key", "state", "goal_key", "start_key", "recorded_key", "result_key"}
 
 # A rope in each state, looked up once per key (the first stored one never changes).
@@ -60,6 +61,10 @@ def _column(row: Any, name: str) -> Any:
 
 def _link(href: str, text: str) -> str:
     return f'<a href="{escape(href)}">{escape(text)}</a>'
+
+
+def _run_page(datasette: Any, run_id: int) -> str:
+    return str(datasette.urls.path(f"/-/twisted/runs/{run_id}"))
 
 
 def _run_links(datasette: Any, database: str, run_id: int, kind: str, solved: bool) -> str:
@@ -121,16 +126,14 @@ def _p_data_cell(datasette: Any, database: str, value: str) -> Callable[[], Any]
 
 def _parameters_cell(value: str) -> Markup | None:
     """A run's parameters folded: the planner and goal (if any) in the summary, all of them inside."""
-    if len(value) > _MAX_PARAMETERS_CHARS:
-        return None  # not a run's parameters: Datasette shows the start of the text
+    parameters = stored_parameters(value)
+    if not parameters:
+        return None  # not JSON, too long or too deep: Datasette shows the start of the text
     try:
-        parameters = json.loads(value)
-        if not isinstance(parameters, dict) or not parameters:
-            return None
-        shown = [f"{name}: {parameters[name]}" for name in ("planner", "goal_spec") if name in parameters]
         folded = json.dumps(parameters, indent=1)
-    except (ValueError, RecursionError):  # not JSON, or nested deeper than Python parses
+    except (ValueError, RecursionError):
         return None
+    shown = [f"{name}: {parameters[name]}" for name in ("planner", "goal_spec") if name in parameters]
     summary = "; ".join(shown) or f"{len(parameters)} parameters"
     summary = summary if len(summary) <= 100 else summary[:99] + "…"
     return Markup(
@@ -160,12 +163,13 @@ def render_cell(row: Any, value: Any, column: str, table: str | None, database: 
         return _parameters_cell(value)
     if table == "runs" and column == "kind" and isinstance(value, str):
         links = _run_links(datasette, database, row["id"], value, _column(row, "message") == "solved")
+        links = " · ".join(filter(None, [_link(_run_page(datasette, row["id"]), "story"), links]))
         return Markup(f"{escape(value)}<br><small>{links}</small>") if links else None
     if table == "search_runs" and column == "outcome" and isinstance(value, str):
         links = _run_links(datasette, database, row["run_id"], "plan", value == "solved")
         return Markup(f"{escape(value)}<br><small>{links}</small>")
     if table is None and column in ("run_id", "plan_run_id") and isinstance(value, int):
-        run = _link(f"{datasette.urls.table(database, 'runs')}/{value}", str(value))
+        run = _link(_run_page(datasette, value), str(value))  # the run's story
         kind = "plan" if column == "plan_run_id" else _column(row, "run_kind")
         links = _run_links(datasette, database, value, kind or "", solved=_column(row, "solved") == 1)
         return Markup(f"{run}<br><small>{links}</small>" if links else run)
@@ -249,9 +253,71 @@ async def _plan_picture(datasette: Any, request: Any) -> Response:
     return await _picture(datasette, "plan", str(run_id), kind)
 
 
+# ------------------------------------------------------------------ the front page and run pages
+
+
+def _page_number(request: Any) -> int:
+    text = request.args.get("page", "1")
+    return int(text) if text.isdigit() and 0 < len(text) < 7 and int(text) > 0 else 1
+
+
+async def _html(datasette: Any, request: Any, title: str, body: Markup, status: int = 200) -> Response:
+    template = datasette.jinja_env.from_string(
+        '{% extends "base.html" %}{% block title %}{{ title }}{% endblock %}'
+        '{% block content %}{{ body }}{% endblock %}'
+    )
+    html = await datasette.render_template(template, {"title": title, "body": body}, request=request)
+    return Response.html(html, status=status)
+
+
+async def _front_page(datasette: Any, request: Any) -> Response:
+    from twisted.browse.server import DATABASE
+
+    page = _page_number(request)
+    database = datasette.get_database(DATABASE)
+    runs = (await database.execute(pages.RUNS, {"offset": (page - 1) * pages.RUNS_A_PAGE})).rows
+    examples = (datasette.plugin_config(PLUGIN) or {}).get("examples", {})
+    body = pages.front_page(runs, page, lambda run_id: _run_page(datasette, run_id), examples)
+    return await _html(datasette, request, "twisted store", body)
+
+
+async def _run_story(datasette: Any, request: Any) -> Response:
+    from twisted.browse.server import DATABASE
+
+    run_id, page = int(request.url_vars["run_id"]), _page_number(request)
+    database = datasette.get_database(DATABASE)
+    ids = {"run_id": run_id}
+    run = (await database.execute(pages.RUN, ids)).first()
+    if run is None:
+        missing = Markup(f"<p>No run {run_id} in this store.</p>")
+        return await _html(datasette, request, "no such run", missing, 404)
+    search = (await database.execute(pages.SEARCH, ids)).first()
+    calls = (await database.execute(pages.RUN_CALLS, ids)).first()
+    pull_test = (await database.execute(pages.PULL_TEST, ids)).first()
+    nodes = []
+    if calls["nodes"]:
+        offset = (page - 1) * pages.NODES_A_PAGE
+        nodes = (await database.execute(pages.RUN_NODES, {**ids, "offset": offset})).rows
+    urls = {
+        "self": _run_page(datasette, run_id),
+        "plan": datasette.urls.path(f"/-/twisted/runs/{run_id}/plan"),
+        "tree": f"{datasette.urls.query(DATABASE, 'run_tree')}?run_id={run_id}",
+        "nodes": f"{datasette.urls.table(DATABASE, 'search_nodes')}?run_id={run_id}",
+    }
+    body = pages.run_page(
+        run, search, calls, pull_test, nodes, page, urls, lambda other: _run_page(datasette, other)
+    )
+    return await _html(datasette, request, f"run {run_id}", body)
+
+
+# ------------------------------------------------------------------ routes
+
+
 @hookimpl
 def register_routes(datasette: Any) -> list[tuple[str, Any]]:
     return [
+        (r"^/$", _front_page),
+        (r"^/-/twisted/runs/(?P<run_id>\d{1,18})$", _run_story),
         (r"^/-/twisted/state\.svg$", _state_picture),
         (r"^/-/twisted/runs/(?P<run_id>\d{1,18})/plan\.(?P<kind>png|gif)$", _plan_picture),
     ]

@@ -37,7 +37,7 @@ SETTINGS = {
 # pictures. Any other /-/ address is a 404 (Datasette 0.65 would take "-" for a database: a 500).
 _OWN_PAGES = re.compile(
     r"^/-/(static/|static-plugins/|(metadata|versions|plugins|settings|databases|threads|actor)(\.json)?$"
-    r"|twisted/state\.svg$|twisted/runs/\d{1,18}/plan\.(png|gif)$)"
+    r"|twisted/state\.svg$|twisted/runs/\d{1,18}(/plan\.(png|gif))?$)"
 )
 # Datasette's own error pages print each error's traceback with its local variables on the terminal
 _CONSOLE_TRACEBACKS = "datasette.handle_exception"
@@ -98,13 +98,32 @@ def datasette_app(path: Path, db_url: str) -> Any:
         pm.register(plugin, name="twisted_browse")
     if pm.has_plugin(_CONSOLE_TRACEBACKS):  # the plugin's handle_exception answers instead
         pm.unregister(name=_CONSOLE_TRACEBACKS)
-    datasette = Datasette(metadata=metadata(DATABASE, db_url), settings=SETTINGS)
-    datasette.remove_database("_memory")
     wal = Path(f"{path}-wal").exists()
-    writable = path.parent.is_dir() and _writable(path.parent)
-    served = _read_only_database(datasette, path, immutable=not (wal or writable))
+    immutable = not (wal or (path.parent.is_dir() and _writable(path.parent)))
+    settings = metadata(DATABASE, db_url, _example_rows(path, immutable))
+    datasette = Datasette(metadata=settings, settings=SETTINGS)
+    datasette.remove_database("_memory")
+    served = _read_only_database(datasette, path, immutable)
     datasette.add_database(served, name=DATABASE)
     return datasette
+
+
+def _example_rows(path: Path, immutable: bool) -> dict[str, tuple[Any, ...] | None]:
+    """The first row of each :data:`twisted.browse.queries.EXAMPLE_ROWS` query in the store (None: none)."""
+    from twisted.browse.queries import EXAMPLE_ROWS
+
+    conn = sqlite3.connect(store_uri(path, immutable), uri=True)
+    try:
+        conn.execute("PRAGMA query_only = ON")
+        rows = {}
+        for name, (sql, _) in EXAMPLE_ROWS.items():
+            try:
+                rows[name] = conn.execute(sql).fetchone()
+            except sqlite3.Error:  # a table of an optional part missing
+                rows[name] = None
+        return rows
+    finally:
+        conn.close()
 
 
 def _writable(folder: Path) -> bool:
