@@ -4,10 +4,10 @@ and a link check of its pages in headless Chromium (issue 63: the browser tells 
 Times (the default): builds a store whose one planner run has N search nodes (default 10,000: random
 ropes of 21 links in a random tree, written through the store's own SearchRun), starts `twisted browse`
 on it in a subprocess on a free port of 127.0.0.1, and times over HTTP: the search_nodes table (first
-page of 50 rows, 100 rows, a page from the middle), and the run's tree query (first and last page of
-100 nodes), each fetched once cold (no picture of it drawn yet; the server has answered two other pages,
-so its templates are compiled) and then warm (repeats). Prints the figures; exits 1 when a page takes a
-second or more.
+page of 50 rows, 100 rows, a page from the middle), the run's tree query (first and last page of 100
+nodes), the run's page (first and last page of 50 nodes) and the front page, each fetched once cold
+(no picture of it drawn yet; the server has answered two other pages, so its templates are compiled)
+and then warm (repeats). Prints the figures; exits 1 when a page takes a second or more.
 
     python bench/browse_page.py [--nodes 10000] [--repeats 5] [--seed 0]
 
@@ -255,12 +255,17 @@ def main() -> int:
         server = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         base = f"http://127.0.0.1:{port}/twisted"
         last = (args.nodes + 99) // 100  # the tree query's pages
+        last_50 = (args.nodes + 49) // 50  # the run page's
+        root = f"http://127.0.0.1:{port}"
         pages = {
             "search_nodes table, first page (50 rows)": f"{base}/search_nodes",
             "search_nodes table, 100 rows": f"{base}/search_nodes?_size=100",
             "search_nodes table, from the middle": f"{base}/search_nodes?_sort=id&_next={args.nodes // 2}",
             "run_tree query, first page (100 nodes)": f"{base}/run_tree?run_id={run_id}",
             f"run_tree query, last page ({last}/{last})": f"{base}/run_tree?run_id={run_id}&page={last}",
+            "run page, first page (50 nodes, plan first)": f"{root}/-/twisted/runs/{run_id}",
+            f"run page, last page ({last_50}/{last_50})": f"{root}/-/twisted/runs/{run_id}?page={last_50}",
+            "front page": f"{root}/",
         }
         try:
             deadline = time.monotonic() + 120
