@@ -229,12 +229,16 @@ async def draw_picture(db_url: str, kind: str, arg: str, suffix: str, limit_s: f
 async def _picture(datasette: Any, kind: str, arg: str, suffix: str) -> Response:
     db_url = (datasette.plugin_config(PLUGIN) or {})["db_url"]
     what = (db_url, kind, arg, suffix)
-    if what not in _kept:
-        _kept[what] = await draw_picture(db_url, kind, arg, suffix, PICTURE_TIME_LIMIT_S)
-        while len(_kept) > _PICTURES_KEPT:
-            _kept.popitem(last=False)
-    _kept.move_to_end(what)
-    status, body, content_type = _kept[what]
+    answer = _kept.get(what)
+    if answer is None:
+        answer = await draw_picture(db_url, kind, arg, suffix, PICTURE_TIME_LIMIT_S)
+        if answer[0] < 500:  # a picture, or why it cannot be drawn; a drawing cut short is tried again
+            _kept[what] = answer
+            while len(_kept) > _PICTURES_KEPT:
+                _kept.popitem(last=False)
+    else:
+        _kept.move_to_end(what)
+    status, body, content_type = answer
     headers = {"Cache-Control": "max-age=600"} if status == 200 else {}
     if content_type == "text/plain":
         content_type = "text/plain; charset=utf-8"
