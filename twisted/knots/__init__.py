@@ -64,6 +64,7 @@ Modules:
 
 from twisted.knots.catalogue import (
     CATALOGUE,
+    COMMON_NAMES,
     COMPOSITE_NOTE,
     KNOT_NAMES,
     UNKNOWN,
@@ -71,16 +72,27 @@ from twisted.knots.catalogue import (
     KnotType,
     crossing_number,
     invariants,
+    knot_words,
+    knotinfo_name,
+    mirror_name,
     mirror_type,
     resolve_knot,
 )
-from twisted.knots.gauss import GaussCode, closed_gauss_code, gauss_code_from_polygon, simplify
+from twisted.knots.gauss import (
+    GaussCode,
+    closed_gauss_code,
+    gauss_code_from_pd,
+    gauss_code_from_polygon,
+    simplify,
+)
+from twisted.knots.knotinfo import KNOTINFO, MAX_TABLE_CROSSINGS, KnotInfoKnot
 from twisted.knots.polynomials import alexander_polynomial, jones_polynomial, kauffman_bracket
 from twisted.knots.rope import KNOTOID, RopeKnot, identify, identify_points, knot_type_name
 from twisted.knots.states import (
     MAX_BUILT_CROSSINGS,
     MAX_ENUMERATED_CROSSINGS,
     least_crossings,
+    minimal_states,
     prime_states_by_type,
     primed_states,
     rotations,
@@ -90,19 +102,24 @@ from twisted.knots.states import (
 
 __all__ = [
     "CATALOGUE",
+    "COMMON_NAMES",
     "COMPOSITE_NOTE",
+    "KNOTINFO",
     "KNOTOID",
     "KNOT_NAMES",
     "MAX_BUILT_CROSSINGS",
     "MAX_ENUMERATED_CROSSINGS",
+    "MAX_TABLE_CROSSINGS",
     "UNKNOWN",
     "GaussCode",
+    "KnotInfoKnot",
     "KnotNameError",
     "KnotType",
     "RopeKnot",
     "alexander_polynomial",
     "closed_gauss_code",
     "crossing_number",
+    "gauss_code_from_pd",
     "gauss_code_from_polygon",
     "identify",
     "identify_points",
@@ -110,7 +127,11 @@ __all__ = [
     "jones_polynomial",
     "kauffman_bracket",
     "knot_type_name",
+    "knot_words",
+    "knotinfo_name",
     "least_crossings",
+    "minimal_states",
+    "mirror_name",
     "mirror_type",
     "prime_states_by_type",
     "primed_states",
