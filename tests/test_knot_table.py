@@ -132,6 +132,28 @@ def test_goal_state_counts_up_to_6_crossings_are_those_the_enumeration_found() -
     )
 
 
+# One of the two 5-crossing states of 5_2+ the enumeration finds and no cut of a diagram gives (and its
+# over/under swap): its ends lie in different faces (log 2026-12-06)
+FIVE_TWO_UNCUT = (
+    '[[1,"O",7,"+"],[2,"U",6,"+"],[3,"O",8,"+"],[4,"O",10,"+"],[5,"U",9,"+"],[6,"O",2,"+"],[7,"U",1,"+"],'
+    '[8,"U",3,"+"],[9,"O",5,"+"],[10,"U",4,"+"]]'
+)
+
+
+def test_a_state_with_its_ends_in_two_faces_may_tie_the_knot_yet_is_no_cut() -> None:
+    from twisted.diagram import diagram
+    from twisted.topology import parse_p_data
+
+    p = parse_p_data(FIVE_TWO_UNCUT)
+    k = identify(p)
+    assert k.under.name == k.over.name == "5_2+" and p.cross == 5
+    head_face, tail_face = diagram(p).end_faces()
+    assert head_face != tail_face
+    assert p not in minimal_states("5_2+") and all(
+        diagram(q).end_faces()[0] == diagram(q).end_faces()[1] for q in minimal_states("5_2+")
+    )
+
+
 @pytest.mark.parametrize("name", ["8_1", "8_19", "5_1#3_1", "4_1#4_1"])
 def test_a_knot_beyond_the_table_is_refused_saying_so(name: str) -> None:
     with pytest.raises(KnotNameError, match="beyond the table .*valid names: the table: 0_1, 3_1\\+"):
