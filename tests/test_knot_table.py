@@ -79,7 +79,8 @@ def test_knotinfos_invariants_agree_with_ours_on_its_diagram_and_its_mirror(name
 def test_knotinfos_pd_codes_read_as_spherogram_reads_them(name: str) -> None:
     """Independent check of the PD reading and of the chirality: spherogram's knot Floer homology of
     KnotInfo's PD code gives the table's Alexander polynomial, and its tau is -signature / 2 with
-    KnotInfo's signature (every table knot is alternating), + for our ``+`` of 3_1, 5_1, 5_2, 7_1."""
+    KnotInfo's signature (every table knot is alternating); KnotInfo's positive knots are drawn with
+only + crossings, so their ``+`` entry is the positive knot."""
     pytest.importorskip("spherogram")
     from tests.test_knots import _spherogram_alexander_and_tau
 
@@ -87,8 +88,8 @@ def test_knotinfos_pd_codes_read_as_spherogram_reads_them(name: str) -> None:
     alexander, tau = _spherogram_alexander_and_tau(list(k.pd))
     assert alexander == CATALOGUE[name + ("+" if k.chiral else "")].alexander
     assert tau == -k.signature // 2
-    if name in ("3_1", "5_1", "5_2", "7_1"):
-        assert tau > 0
+    if name in ("3_1", "5_1", "5_2", "7_1", "7_2", "7_3", "7_4", "7_5"):  # KnotInfo: positive knots
+        assert tau > 0 and set(gauss_code_from_pd(k.pd).signs) == {1}  # KnotInfo's diagram: all +
 
 
 def _connected_sum(a: str, b: str) -> GaussCode:

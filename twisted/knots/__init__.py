@@ -40,9 +40,9 @@ Invariants (computed here, no dependency):
 Chirality. A crossing's sign is the P-data sign ``sign((d_over x d_under) . e_z)``, the usual
 right-hand rule, which KnotInfo's PD codes follow as well. ``K+`` names a chiral knot as KnotInfo gives
 it (its PD code has KnotInfo's Jones polynomial), ``K-`` its mirror image (``V_mirror(t) = V(1/t)``);
-for ``3_1``, ``5_1``, ``5_2`` and ``7_1`` that ``+`` is the positive knot: ``3_1+`` is the right-handed
-trefoil, ``V = t + t^3 - t^4``, so the 3-crossing rope whose visits alternate O/U with one common sign
-``+`` ties ``3_1+``. ``4_1`` and ``6_3`` are their own mirror images.
+for ``3_1``, ``5_1``, ``5_2`` and ``7_1`` ... ``7_5`` that ``+`` is the positive knot: ``3_1+`` is the
+right-handed trefoil, ``V = t + t^3 - t^4``, so the 3-crossing rope whose visits alternate O/U with one
+common sign ``+`` ties ``3_1+``. ``4_1`` and ``6_3`` are their own mirror images.
 
 Identification compares ``(alexander, jones)`` with the knot table (:data:`CATALOGUE`: KnotInfo's prime
 knots up to 7 crossings, each chirality, and the sums of two with at most 7 crossings in all); a
