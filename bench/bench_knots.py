@@ -3,7 +3,7 @@ closures agree) or are knotoids, the (under, over) classes, the smallest count p
 identify() takes per state, and (with --db) how often the data visited them.
 
     python bench/bench_knots.py [--max-crossings 4] [--db sqlite:////tmp/copy.db]
-    python bench/bench_knots.py --setup [--plan]
+    python bench/bench_knots.py --setup [--plan] [--knots 6_1+ 3_1+#3_1+ ...]
 
 --db opens (and so migrates) the database: point it at a copy, not at data you must keep unchanged.
 
@@ -44,7 +44,7 @@ print(json.dumps(made))
 """
 
 
-def goal_setup(plan: bool) -> None:
+def goal_setup(plan: bool, only: list[str] | None = None) -> None:
     """Set-up of every knot goal of the table, each in a fresh process (see the module docstring)."""
     import json
     import os
@@ -58,7 +58,7 @@ def goal_setup(plan: bool) -> None:
     header = f"{'knot':<10} {'crossings':>9} {'states':>6} {'import s':>9} {'goal s':>7}"
     print(header + ("  first plan setup_s (fresh database)" if plan else ""))
     worst = 0.0
-    for name in CATALOGUE:
+    for name in only or CATALOGUE:
         if name == "0_1":
             continue
         command = [sys.executable, "-c", _GOAL_SETUP, name]
@@ -75,7 +75,7 @@ def goal_setup(plan: bool) -> None:
                     env=env, cwd=root, capture_output=True, text=True, check=False,
                 )  # fmt: skip
             if ran.returncode == 2:
-                row += "  refused: " + " ".join(ran.stdout.split())[-80:]
+                row += "  refused: " + " ".join((ran.stdout + ran.stderr).split())[-90:]
             else:
                 row += f"  {json.loads(ran.stdout)['setup_s']:.2f}"
         print(row, flush=True)
@@ -88,9 +88,10 @@ def main() -> None:
     parser.add_argument("--db", help="database URL (a copy: opening migrates it)")
     parser.add_argument("--setup", action="store_true", help="time every table knot goal's set-up instead")
     parser.add_argument("--plan", action="store_true", help="with --setup: also a first plan on a fresh db")
+    parser.add_argument("--knots", nargs="+", help="with --setup: only these table knots (default: all)")
     args = parser.parse_args()
     if args.setup:
-        goal_setup(args.plan)
+        goal_setup(args.plan, args.knots)
         return
 
     t0 = time.perf_counter()
