@@ -183,3 +183,24 @@ def test_a_7_crossing_knot_goal_is_made_but_the_model_encodes_at_most_6() -> Non
     assert goal.crossings == 7 and len(goal.states) == 4
     with pytest.raises(PlanInputError, match="7 crossings; the model encodes at most 6"):
         make_goal(knot="7_1")
+
+
+def test_a_knot_goal_at_its_crossing_number_enumerates_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Before: a 5-crossing knot goal enumerated all 130,304 states of 5 crossings (and plan kept them in
+    the store). Now its states are cut from the diagram; only a count above the crossing number
+    enumerates, and only that is kept."""
+    import twisted.knots.states
+    import twisted.moves
+    from twisted.store.knots import kept_crossings
+
+    def no_enumeration(*args: object, **kwargs: object) -> None:
+        raise AssertionError("enumerated")
+
+    monkeypatch.setattr(twisted.knots.states, "states_by_type", no_enumeration)
+    monkeypatch.setattr(twisted.moves, "enumerate_states", no_enumeration)
+    twisted.knots.states._diagram_states.cache_clear()
+    twisted.knots.states.minimal_states.cache_clear()
+    for name in ("5_1", "5_2", "6_2", "7_7", "granny", "3_1#4_1"):
+        assert knot_goal(name).states
+    assert kept_crossings("5_2") is None and kept_crossings("5_1", 5) is None
+    assert kept_crossings("overhand", 5) == 5  # above its crossing number: enumerated, kept
