@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.knots.catalogue import CATALOGUE
+from twisted.knots.catalogue import knot_words as knot_words_of
 from twisted.render.geometry import (
     ROPE_COLOUR,
     SIGN_COLOUR,
@@ -30,23 +31,12 @@ from twisted.topology import PData, PDataError, parse_p_data, top
 
 __all__ = ["KNOT_WORDS", "blob_points", "gauss_svg", "knot_words", "p_data_of_cell", "rope_svg"]
 
-# What each stored knot_type means in words (names as in docs/DESIGN.md section 9.3).
+# What each stored knot_type means in words (the knot table's, docs/DESIGN.md section 9.3).
 KNOT_WORDS = {
-    "0_1": "unknot",
-    "3_1+": "trefoil (overhand knot), right-handed",
-    "3_1-": "trefoil (overhand knot), left-handed",
-    "4_1": "figure-eight knot",
-    "5_1+": "cinquefoil, positive",
-    "5_1-": "cinquefoil, negative",
-    "5_2+": "three-twist knot, positive",
-    "5_2-": "three-twist knot, negative",
-    "3_1+#3_1+": "granny knot (two right-handed trefoils)",
-    "3_1-#3_1-": "granny knot (two left-handed trefoils)",
-    "3_1+#3_1-": "square (reef) knot",
+    **{knot_type: knot_words_of(knot_type) for knot_type in CATALOGUE},
     "knotoid": "the two closures differ: no knot",
-    "unknown": "a knot outside the catalogue",
+    "unknown": "a knot outside the table",
 }
-assert set(CATALOGUE) <= set(KNOT_WORDS), "every catalogue knot needs its words"
 
 _MAX_KEY_CHARS = 4096  # a P-data key of 6 crossings is about 80 characters; longer text is not parsed
 
