@@ -4,16 +4,15 @@ Each trial runs the CLI in a child process under a memory limit (``RLIMIT_AS``, 
 ``PROBE_MEMORY_GB`` to change it) and a timeout, and reports its exit code, its peak memory (the
 child's maximum resident set, from ``wait4``), whether it printed a traceback or a raw terminal escape,
 and whether the store changed. :data:`TRIALS` lists ``(item, name, expected, run, ok)`` as
-``bench/probe_store.py`` does; alone,
+``bench/probe_store.py`` does; ``bench/probe.py`` runs them with the others, or alone:
 
-    python bench/probe_payloads.py --db PATH/TO/twisted.db
+    python bench/probe.py --db PATH/TO/twisted.db --only 62.1,62.4,62.7,62.8,62.9
 
-prints the same table. Run it with an older checkout on ``PYTHONPATH`` to see the "before".
+Run it with an older checkout on ``PYTHONPATH`` to see the "before".
 """
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import io
 import json
@@ -23,7 +22,6 @@ import shutil
 import sqlite3
 import subprocess
 import sys
-import tempfile
 import threading
 import zipfile
 import zlib
@@ -71,8 +69,10 @@ def _digest(db: Path) -> str:
     return hashlib.sha256(db.read_bytes()).hexdigest()
 
 
-def _unchanged(db: Path, before: str) -> str:
-    return "" if _digest(db) == before else " (STORE CHANGED)"
+def _unchanged(db: Path, before: str, out: str) -> str:
+    """``out`` of :func:`run_limited` with ", store CHANGED" after its exit code when the store changed."""
+    head, _, tail = out.partition(": ")
+    return out if _digest(db) == before else f"{head}, store CHANGED: {tail}"
 
 
 def _sql(db: Path, statement: str, *params: object) -> None:
@@ -166,7 +166,7 @@ def replay_buffer(kind: str) -> Callable[[Path, Path], str]:
         run_id = _sac_run_with_buffer(db, buffer)
         before = _digest(db)
         out = run_limited(db, "rl", "train", "--resume", str(run_id), "--threads", "1", cwd=work)
-        return f"{out} [row {len(buffer):,} bytes]{_unchanged(db, before)}"
+        return _unchanged(db, before, out.replace(": ", f" [row {len(buffer):,} bytes]: ", 1))
 
     return run
 
@@ -204,7 +204,7 @@ def model_bomb(command: str) -> Callable[[Path, Path], str]:
             args = ["models", "--import", "bomb.pt"]
         before = _digest(db)
         out = run_limited(db, *args, cwd=work)
-        return f"{out} [row {len(weights):,} bytes]{_unchanged(db, before)}"
+        return _unchanged(db, before, out.replace(": ", f" [row {len(weights):,} bytes]: ", 1))
 
     return run
 
@@ -218,7 +218,7 @@ def import_escaped_file_name(db: Path, work: Path) -> str:
     name = "\x1b[41mEVIL\x1b[0m.pt"
     shutil.copyfile(default_model_path(), work / name)
     before = _digest(db)
-    return run_limited(db, "models", "--import", name, cwd=work) + _unchanged(db, before)
+    return _unchanged(db, before, run_limited(db, "models", "--import", name, cwd=work))
 
 
 HOSTILE = "x\x1b[2J\x1b]52;c;ZXZpbA==\x07y"
@@ -244,7 +244,7 @@ def readonly_url(db: Path, work: Path) -> str:
     before = _digest(db)
     env = {"TWISTED_DB": f"sqlite:///../{db.name}?mode=ro"}
     out = run_limited(None, "problems", "import", "../one.json", "--name", "zz2", cwd=work / "sub", env=env)
-    return out + _unchanged(db, before)
+    return _unchanged(db, before, out)
 
 
 # ---- item 4: improve's evaluation-set guard ----------------------------------------------------------------
@@ -276,7 +276,7 @@ def improve_guard(goalsets: str | None) -> Callable[[Path, Path], str]:
         before = _digest(db)
         args = ["improve", "--tune-set", "mytune", "--train-set", "mytrain", "--goals", "1"]
         args += ["--generations", "1", "--hours", "0.01", *extra]
-        return run_limited(db, *args, cwd=work) + _unchanged(db, before)
+        return _unchanged(db, before, run_limited(db, *args, cwd=work))
 
     return run
 
@@ -301,39 +301,3 @@ TRIALS: list[tuple[str, str, str, Callable[[Path, Path], str], Callable[[str], b
     ("62.4", "improve, final-*.json not UTF-8", "exit 2 naming it", improve_guard("BAD-UTF8"), exit2),
     ("62.4", "improve, a folder named final-x.json", "exit 2, named", improve_guard("DIR-NAMED-JSON"), exit2),
 ]
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--db", type=Path, required=True, help="a store (SQLite file) to copy for each trial")
-    parser.add_argument("--only", default="", help="comma-separated items (e.g. 62.1,62.9; default: all)")
-    args = parser.parse_args()
-    only = {s.strip() for s in args.only.split(",") if s.strip()}
-    root = Path(tempfile.mkdtemp(prefix="probe-payloads-"))
-    master = root / "master.db"  # upgraded once, so that no trial's digest changes by a migration
-    shutil.copyfile(args.db, master)
-    from twisted.store import open_store
-
-    open_store(f"sqlite:///{master}").close()
-    conn = sqlite3.connect(master)
-    conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # every row in the file that is copied
-    conn.close()
-    failed = 0
-    chosen = [t for t in TRIALS if not only or t[0] in only]
-    for i, (item, name, expected, run, ok) in enumerate(chosen):
-        work = root / f"trial-{i:02d}"
-        work.mkdir()
-        db = work / "store.db"
-        shutil.copyfile(master, db)
-        got = run(db, work)
-        verdict = "ok" if ok(got) else "NOT OK"
-        failed += verdict != "ok"
-        print(f"{item:>4} | {name:44s} | {expected:18s} | {verdict:6s} | {got}", flush=True)
-    limit = f"limit {LIMIT_BYTES / 2**30:.1f} GiB"
-    print(f"\n{len(chosen)} trials, {failed} not as expected ({limit}; work folder {root})")
-
-
-if __name__ == "__main__":
-    main()
