@@ -25,6 +25,7 @@ from twisted.render.geometry import (
     rope_pieces,
     visit_labels,
 )
+from twisted.rope import ROPE
 from twisted.topology import PData, PDataError, parse_p_data, top
 
 __all__ = ["KNOT_WORDS", "blob_points", "gauss_svg", "knot_words", "p_data_of_cell", "rope_svg"]
@@ -47,7 +48,7 @@ KNOT_WORDS = {
 }
 assert set(CATALOGUE) <= set(KNOT_WORDS), "every catalogue knot needs its words"
 
-_MAX_LINKS = 1000  # a points BLOB longer than this is not a rope of this project: left to the default
+_MAX_KEY_CHARS = 4096  # a P-data key of 6 crossings is about 80 characters; longer text is not parsed
 
 
 def knot_words(knot_type: object) -> str | None:
@@ -56,18 +57,20 @@ def knot_words(knot_type: object) -> str | None:
 
 
 def blob_points(value: object) -> npt.NDArray[np.float64] | None:
-    """The (n, 3) link points of a ``points`` BLOB (little-endian float64), None when it is not one."""
-    if not isinstance(value, bytes) or not value or len(value) % 24 or len(value) > 24 * _MAX_LINKS:
+    """The (n, 3) link points of a ``points`` BLOB (little-endian float64), None when it is not the rope
+    of this store (the rope profile: ``ROPE.n_points`` finite points; a store of another rope is refused
+    when it is opened)."""
+    if not isinstance(value, bytes) or len(value) != 24 * ROPE.n_points:
         return None
     points = np.frombuffer(value, "<f8").reshape(-1, 3)
-    if len(points) < 2 or not np.isfinite(points).all():
+    if not np.isfinite(points).all():
         return None
     return points
 
 
 def p_data_of_cell(value: object) -> PData | None:
     """The P-data state in a cell (JSON text of a ``p_data`` or ``key`` column), None when it is not one."""
-    if not isinstance(value, str) or not value.startswith("["):
+    if not isinstance(value, str) or not value.startswith("[") or len(value) > _MAX_KEY_CHARS:
         return None
     try:
         return parse_p_data(value)
