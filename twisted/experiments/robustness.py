@@ -233,25 +233,25 @@ def run_robustness(
         plan, goal, options, planning_s = model_plan(store, knot, 0, settings.timeout_s, workers, stop)
         progress(f"{knot}: plan run {plan.run_id} ({planning_s:.1f} s in the model)")
         done = done_episodes(store, plan.run_id)
-        for level in levels:
-            for seed in seeds:
-                for closed in loops:
-                    if stop():
-                        return results
-                    if (level.name, seed, closed) in done:
-                        continue
-                    planner = ModelPlanner(store, goal, options, None, workers, None, stop)
-                    try:
-                        result = run_episode(
-                            store, plan, goal, planner, level, seed, replace(settings, closed_loop=closed)
+        # one planner for the knot's episodes: the model and the simulator workers are loaded once
+        planner = ModelPlanner(store, goal, options, None, workers, None, stop)
+        try:
+            for level in levels:
+                for seed in seeds:
+                    for closed in loops:
+                        if stop():
+                            return results
+                        if (level.name, seed, closed) in done:
+                            continue
+                        episode = replace(settings, closed_loop=closed)
+                        result = run_episode(store, plan, goal, planner, level, seed, episode)
+                        loop = "closed" if closed else "open"
+                        progress(
+                            f"{knot} {level.name} seed {seed} {loop} loop: episode {result.run_id} "
+                            f"{result.outcome}, {result.actions} actions, {result.replans} replans, "
+                            f"{result.elapsed_s:.1f} s"
                         )
-                    finally:
-                        planner.close()
-                    loop = "closed" if closed else "open"
-                    progress(
-                        f"{knot} {level.name} seed {seed} {loop} loop: episode {result.run_id} "
-                        f"{result.outcome}, "
-                        f"{result.actions} actions, {result.replans} replans, {result.elapsed_s:.1f} s"
-                    )
-                    results.append(result)
+                        results.append(result)
+        finally:
+            planner.close()
     return results
