@@ -19,7 +19,9 @@ the machine before, and each set of kernels forced with ``ATEN_CPU_CAPABILITY``,
 ``ONEDNN_MAX_CPU_ISA`` and ``MKL_ENABLE_INSTRUCTIONS`` gave a digest of its own; ``random-low`` and
 ``low-level-only`` were the same). To check a refactoring on a new machine, ``--record`` at the commit
 before it, then compare at the commit after. The tests compare the two model-free cases with the
-recorded digests and replay a model case twice on one machine.
+recorded digests and replay a model case twice on one machine. 2026-12-06: the digest leaves out the
+``kind`` statistics table (written every step, read by nothing, then removed); every case was recorded
+again without it at the commit before the removal, on the 2-core machine of that day.
 """
 
 from __future__ import annotations
@@ -79,6 +81,7 @@ def digest(search: Any, result: Any) -> str:
         "stats": {
             t: {k: [repr(x) for x in v] for k, v in sorted(e.items())}
             for t, e in sorted(result.stats.items())
+            if t != "kind"  # a table kept until 2026-12-06 that nothing read (every search the same)
         },
         "rng": repr(search.rng.bit_generator.state),
         "status": result.status,
