@@ -146,9 +146,19 @@ def stored_options(parameters: Mapping[str, Any], run_id: int | None = None) -> 
         raise PlanInputError(f"{run} cannot be continued: {exc}; start a new run") from None
 
 
-def search_parts(options: PlannerOptions, goal: Goal, sampler: CurveSampler | None, recorder: Any) -> Parts:
+def search_parts(
+    options: PlannerOptions,
+    goal: Goal,
+    sampler: CurveSampler | None,
+    recorder: Any,
+    parameters: Mapping[str, Any] | None = None,
+    start: PData | None = None,
+) -> Parts:
     """The parts of a search (:func:`twisted.planner.strategies.default_parts`); with ``tighten`` the goal
-    test is the pull test, each one stored with the run through ``recorder``."""
+    test is the pull test, each one stored with the run through ``recorder``; a run whose ``parameters``
+    ask for it searches both ways from ``start`` (:func:`twisted.planner.untie.both_ways_parts`)."""
+    from twisted.planner.untie import both_ways_parts
+
     goal_test = None
     if options.tighten:
 
@@ -156,7 +166,8 @@ def search_parts(options: PlannerOptions, goal: Goal, sampler: CurveSampler | No
             recorder.record_tightening(node, result, goal, ties)
 
         goal_test = PullTest(goal, record)
-    return default_parts(options, goal, sampler, goal_test)
+    variant = both_ways_parts(parameters, goal, start) if parameters is not None and start is not None else {}
+    return default_parts(options, goal, sampler, goal_test, **variant)
 
 
 def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None = None) -> PlannerOptions:
@@ -321,11 +332,11 @@ def start_search(
     or the end configuration of stored run ``from_run``.
 
     ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id). The
-    search also removes crossings (:class:`twisted.planner.untie.BothWays`, its removing steps' curves
-    from ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
+    search also removes crossings (:mod:`twisted.planner.untie`, its removing steps' curves from
+    ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
     when adding moves alone cannot reach the goal from the start.
     """
-    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, BothWays, both_ways_needed, run_end
+    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, both_ways_needed, run_end
     from twisted.store.search import SearchRun
 
     options.validate()
@@ -366,15 +377,13 @@ def start_search(
     start = "straight rope" if start_configuration_id is None else f"configuration {start_configuration_id}"
     start = start if from_run is None else f"end of run {from_run}"
     _log_start(f"new search from the {start}", recorder.run_id, goal, options, parameters.get("model_id"))
-    extra: dict[str, Any] = {"removal_curves": removal_curves} if both_ways else {}
-    return (BothWays if both_ways else Twisted)(
+    return Twisted(
         goal,
         tree,
         options,
         pool,
         high_level(store, goal, options.plan_limit, both_ways),
-        **extra,
-        parts=search_parts(options, goal, sampler, recorder),
+        parts=search_parts(options, goal, sampler, recorder, parameters, root.p_data),
         recorder=recorder,
         run_id=recorder.run_id,
         stop=stop,
@@ -443,17 +452,14 @@ def resume_search(
     recorder = _Logged(SearchRun(store, run_id, node_ids))
     resumed = f"resumed at iteration {checkpoint.iteration} ({checkpoint.elapsed_s:.1f} s searched)"
     _log_start(resumed, run_id, info.goal, options, info.parameters.get("model_id"))
-    from twisted.planner.untie import search_class
-
-    cls, extra = search_class(info.parameters)
-    return cls(
+    both_ways = bool(info.parameters.get("both_ways"))
+    return Twisted(
         info.goal,
         tree,
         options,
         pool,
-        high_level(store, info.goal, options.plan_limit, bool(extra)),
-        **extra,
-        parts=search_parts(options, info.goal, sampler, recorder),
+        high_level(store, info.goal, options.plan_limit, both_ways),
+        parts=search_parts(options, info.goal, sampler, recorder, info.parameters, tree.nodes[0].p_data),
         recorder=recorder,
         checkpoint=checkpoint,
         run_id=run_id,

@@ -1,6 +1,5 @@
 """The search tree ``T`` of Algorithm 1: reached configurations (``Node``) in creation order, indexed by
-topological state (``SearchTree``); and the statistics keys of a (node, requested next state) pair and
-of a plan step's move kind."""
+topological state (``SearchTree``); and the statistics key of a (node, requested next state) pair."""
 
 from __future__ import annotations
 
@@ -11,7 +10,7 @@ import numpy as np
 
 from twisted.topology import PData
 
-__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "is_cinched", "kind_key", "pair_key"]
+__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "is_cinched", "pair_key"]
 
 
 @dataclass(frozen=True)
@@ -28,13 +27,6 @@ CINCH = CinchAction()
 def is_cinched(node: Node) -> bool:
     """Whether ``node`` was made by a cinch, not a curve."""
     return getattr(node.curve, "action", "curve") == "cinch"
-
-
-def kind_key(move: Any, cross: int) -> str:
-    """The key of a plan step in the ``kind`` statistics table: its move kind (``R1``, ``R2``,
-    ``Cross``, a removing move with ``^-1``) and the crossings of the state it starts from, e.g.
-    ``"R1@3"``."""
-    return f"{move.kind}^-1@{cross}" if move.remove else f"{move.kind}@{cross}"
 
 
 def pair_key(node_index: int, next_state_key: str) -> str:
