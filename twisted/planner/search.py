@@ -52,7 +52,7 @@ import numpy as np
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
 from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
-from twisted.planner.tree import CINCH, Node, SearchTree, pair_key
+from twisted.planner.tree import CINCH, Node, SearchTree, curve_row, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
@@ -128,10 +128,50 @@ class SearchResult:
     states: int
     path: list[Node] = field(default_factory=list)
     stats: dict[str, Any] = field(default_factory=dict)  # the checkpoint's tables (STATS_TABLES)
+    goal: Goal | None = None
+    tighten: bool = False  # the goal test was the pull test
+    pull_tests: int = 0
+    setup_s: float = 0.0  # set-up before the search (twisted.planner.session.run_search), in elapsed_s
+    model: dict[str, Any] = field(default_factory=dict)  # the inverse model sampled (model_id, model_samples)
 
     @property
     def solved(self) -> bool:
         return self.status == "solved"
+
+    def plan(self) -> list[dict[str, Any]]:
+        """The low-level plan as rows: step number, action and curve, crossings and state after it."""
+        return [
+            {"step": i, **curve_row(node.curve), "cross": node.p_data.cross, "state": node.p_data.to_list()}
+            for i, node in enumerate(self.path[1:], start=1)
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready data (what ``twisted plan --json`` prints)."""
+        goal = self.goal
+        return {
+            "run_id": self.run_id,
+            "goal": None if goal is None else goal.spec,
+            "knot": None if goal is None else goal.knot,
+            "goal_states": [] if goal is None else [p.to_list() for p in goal.states],
+            "reached_state": self.path[-1].p_data.to_list() if self.path else None,
+            "outcome": self.status,
+            "solved": self.solved,
+            "search_time_s": round(self.elapsed_s, 3),
+            "setup_s": round(self.setup_s, 3),
+            "sim_calls": self.sim_calls,
+            "sim_calls_by_source": self.calls_by_source(),
+            "plan_steps_by_move": {
+                kind: {"tried": tried, "reached": reached}
+                for kind, (tried, reached) in self.steps_by_move().items()
+            },
+            "iterations": self.iterations,
+            "nodes": self.nodes,
+            "states": self.states,
+            "plan": self.plan(),
+            "tighten": self.tighten,
+            "pull_tests": self.pull_tests,
+            **self.model,
+        }
 
     def calls_by_source(self) -> dict[str, int]:
         """Simulator calls per source of curves (CALL_SOURCES); they add up to ``sim_calls`` unless the
@@ -320,6 +360,9 @@ class Twisted:
             states=len({self.tree.nodes[i].p_data.key for i in range(committed)}),
             path=self.tree.path(self.goal_node.index) if self.goal_node is not None else [],
             stats=self._boundary.stats,
+            goal=self.goal,
+            tighten=self.options.tighten,
+            pull_tests=self.pull_tests,
         )
 
     def _rollback(self, committed: int) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from twisted.topology import PData
 
-__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "is_cinched", "pair_key"]
+__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "curve_row", "is_cinched", "pair_key"]
 
 
 @dataclass(frozen=True)
@@ -27,6 +27,15 @@ CINCH = CinchAction()
 def is_cinched(node: Node) -> bool:
     """Whether ``node`` was made by a cinch, not a curve."""
     return getattr(node.curve, "action", "curve") == "cinch"
+
+
+def curve_row(curve: Any) -> dict[str, Any]:
+    """A step of a low-level plan as a row: its action, and the curve's parameters (None for a cinch)."""
+    action = getattr(curve, "action", "curve")
+    if action != "curve":
+        return {"action": action, "link": None, "z_max_m": None, "x_m": None, "y_m": None}
+    parameters = {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
+    return {"action": action, **parameters}
 
 
 def pair_key(node_index: int, next_state_key: str) -> str:
