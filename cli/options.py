@@ -158,7 +158,11 @@ def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
             raise _bad(f"{spec.flag} {value}: {problem}")
         return value
 
-    option = typer.Option(None, spec.flag, callback=check, help=help, rich_help_panel=PLANNER_PANEL)
+    # a choice is named by its option (the help lists the values): a list of them would be cut mid-word
+    metavar = spec.name.upper() if spec.choices else None
+    option = typer.Option(
+        None, spec.flag, callback=check, help=help, metavar=metavar, rich_help_panel=PLANNER_PANEL
+    )
     return inspect.Parameter(
         spec.name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=annotation | None
     )

@@ -624,13 +624,17 @@ class SearchRequest:
 
 
 class SearchProgress:
-    """What :func:`run_search` reports as it goes; each method does nothing here (override what you show)."""
+    """What :func:`run_search` reports as it goes (override what you show); here nothing is shown and the
+    search is kept as ``search`` (a bench reads its tree)."""
+
+    search: Twisted | None = None
 
     def phase(self, what: str, spent_s: float) -> None:
         """A step of the set-up begins (``what``: "checking the goal", "loading the model", ...)."""
 
     def started(self, search: Twisted) -> None:
         """The search is built (its run id known), about to run."""
+        self.search = search
 
     def iteration(self, search: Twisted) -> None:
         """An iteration ended."""
