@@ -184,10 +184,7 @@ def plan_command(
         from_run=from_run,
         removal_curves=removal_curves,
         model_id=model_id,
-        workers=workers,
-        timeout_s=timeout_s,
-        max_iterations=max_iterations,
-        checkpoint_every_s=checkpoint_every_s,
+        **budget(workers, timeout_s, max_iterations, checkpoint_every_s),
     )
     check_search(request)
     if picture is not None:
@@ -205,6 +202,18 @@ def plan_command(
         )
         raise typer.Exit(exit_code)
     raise typer.Exit(EXIT_NOT_REACHED)
+
+
+def budget(
+    workers: int, timeout_s: float, max_iterations: int | None, checkpoint_every_s: float
+) -> dict[str, Any]:
+    """The :class:`SearchRequest` fields of the options in the "Budget and workers" panel."""
+    return {
+        "workers": workers,
+        "timeout_s": timeout_s,
+        "max_iterations": max_iterations,
+        "checkpoint_every_s": checkpoint_every_s,
+    }
 
 
 def _picture_file(path: Path) -> Path:
@@ -374,21 +383,6 @@ def print_result(result: Any, as_json: bool) -> None:
         console.print(table)
 
 
-def _tightened_dict(t: Any) -> dict[str, Any] | None:
-    if t is None:
-        return None
-    return {
-        "ok": t.ok,
-        "reason": t.reason,
-        "p_data": None if t.p_data is None else t.p_data.to_list(),
-        "knot": None if t.knot is None else t.knot.to_dict(),
-        "knot_type": t.knot_name,
-        "end_distance_m": t.end_distance_m,
-        "sim_seconds": t.sim_seconds,
-        "wall_seconds": t.wall_seconds,
-    }
-
-
 @app.command("replay")
 def replay_command(
     ctx: typer.Context,
@@ -411,32 +405,7 @@ def replay_command(
         fail(str(exc))
     ok = result.ties_goal if tighten else result.reached_goal
     if as_json:
-        print_json(
-            {
-                "run_id": run_id,
-                "goal": result.goal.spec,
-                "reached_goal": result.reached_goal,
-                "steps": [
-                    {
-                        **curve_row(step.curve),
-                        "recorded": step.recorded.to_list(),
-                        "replayed": None if step.replayed is None else step.replayed.to_list(),
-                        "reason": step.reason,
-                    }
-                    for step in result.steps
-                ],
-                **(
-                    {
-                        "goal_knot_types": sorted(result.goal.knot_types),
-                        "tightened": _tightened_dict(result.tightened),
-                        "ties_goal": result.ties_goal,
-                    }
-                    if tighten
-                    else {}
-                ),
-            },
-            indent=None,
-        )
+        print_json(result.to_dict(), indent=None)
     else:
         table = Table(title=f"replay of run {run_id}")
         for name in ("step", "link", "recorded state", "replayed state", "same"):

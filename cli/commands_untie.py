@@ -14,16 +14,19 @@ import typer
 
 from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, err_console, seed_option
 from cli.commands_plan import (
+    OUTPUT,
+    START,
     CheckpointEvery,
     MaxIterations,
     RemovalCurves,
     Timeout,
     Workers,
+    budget,
     check_search,
     print_result,
     run_shown,
 )
-from cli.options import json_option
+from cli.options import PLANNER_PANEL, json_option
 from twisted.planner.session import SearchRequest
 
 RunId = Annotated[
@@ -42,18 +45,26 @@ def untie_command(
     run_id: RunId,
     timeout_s: Timeout = 1800.0,
     planner: str | None = typer.Option(
-        None, "--planner", help="twisted (default: the inverse model for adding steps) | random-low."
+        None,
+        "--planner",
+        help="twisted (default: the inverse model for adding steps) | random-low.",
+        rich_help_panel=PLANNER_PANEL,
     ),
     removal_curves: RemovalCurves = None,
     workers: Workers = 2,
     seed: int | None = seed_option(None, "Seed of the search (default 0)."),
     model_id: int | None = typer.Option(
-        None, "--model", help="Inverse model id (default: the newest in the database, else the shipped one)."
+        None,
+        "--model",
+        help="Inverse model id (default: the newest in the database, else the shipped one).",
+        rich_help_panel=START,
     ),
-    resume: bool = typer.Option(False, "--resume", help="Continue the stopped untie run RUN_ID."),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the stopped untie run RUN_ID.", rich_help_panel=START
+    ),
     max_iterations: MaxIterations = None,
     checkpoint_every_s: CheckpointEvery = 2.0,
-    as_json: bool = json_option("the result"),
+    as_json: bool = json_option("the result", panel=OUTPUT),
 ) -> None:
     """Plan from where run RUN_ID ended to the straight rope, removing crossings (see docs/untie.md)."""
     request = SearchRequest(
@@ -64,10 +75,7 @@ def untie_command(
         from_run=None if resume else run_id,
         removal_curves=removal_curves,
         model_id=model_id,
-        workers=workers,
-        timeout_s=timeout_s,
-        max_iterations=max_iterations,
-        checkpoint_every_s=checkpoint_every_s,
+        **budget(workers, timeout_s, max_iterations, checkpoint_every_s),
     )
     check_search(request)
     result, exit_code = run_shown(ctx, request, as_json)

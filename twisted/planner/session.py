@@ -494,6 +494,28 @@ class ReplayResult:
     steps: list[ReplayStep]
     # with tighten=True: the pull test of the replayed final rope (None when it was not run)
     tightened: Any = None
+    tighten: bool = False  # the pull test was asked for
+
+    def to_dict(self) -> dict[str, Any]:
+        """The replay as JSON-ready data (what ``twisted replay --json`` prints)."""
+        from twisted.planner.tree import curve_row
+
+        steps = [
+            {
+                **curve_row(step.curve),
+                "recorded": step.recorded.to_list(),
+                "replayed": None if step.replayed is None else step.replayed.to_list(),
+                "reason": step.reason,
+            }
+            for step in self.steps
+        ]
+        out: dict[str, Any] = {"run_id": self.run_id, "goal": self.goal.spec}
+        out.update(reached_goal=self.reached_goal, steps=steps)
+        if self.tighten:
+            out["goal_knot_types"] = sorted(self.goal.knot_types)
+            out["tightened"] = None if self.tightened is None else self.tightened.to_dict()
+            out["ties_goal"] = self.ties_goal
+        return out
 
     @property
     def reached_goal(self) -> bool:
@@ -543,7 +565,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
         if result.state is None:
             break
         state, final_p_data = result.state, result.p_data
-    out = ReplayResult(run_id, info.goal, steps)
+    out = ReplayResult(run_id, info.goal, steps, tighten=tighten)
     if tighten and final_p_data is not None:
         from twisted.store.knots import record_tightening
         from twisted.tighten import tighten as pull
