@@ -60,6 +60,7 @@ from twisted.collect import (
     CollectRun,
     CollectSummary,
 )
+from twisted.experiments.tasks import TaskKind
 from twisted.store import Run, Store
 from twisted.store.db import sqlite_path
 from twisted.store.queries import BatchRecord, add_collect_batch, batch_id
@@ -514,8 +515,13 @@ class RayBackend:
     min_parallel = 0
 
     @contextmanager
-    def open(self, store: Store, db_url: str, workers: int, parallel: int) -> Iterator[_RayTaskPool]:
-        """Connect to (or start) the cluster; a pool of Ray tasks for the block."""
+    def open(
+        self, store: Store, db_url: str, workers: int, parallel: int, kind: TaskKind | None = None
+    ) -> Iterator[_RayTaskPool]:
+        """Connect to (or start) the cluster; a pool of Ray tasks of ``kind`` (default: an evaluation's
+        tasks) for the block."""
+        from twisted.experiments.leases import EVAL_TASKS
+
         with ray_cluster(self.address) as ray:
             cpus = cluster_cpus(ray)
             if workers > cpus:
@@ -526,30 +532,30 @@ class RayBackend:
             url = worker_url(store) if sqlite_path(store.url) is not None else db_url
             in_flight = parallel or max(1, cpus // workers)
             parameters = {"ray": {"address": self.address, "cpus": cpus}}
-            yield _RayTaskPool(ray, store, url, workers, self.max_retries, in_flight, parameters)
+            options = {"num_cpus": workers, "max_retries": self.max_retries}
+            yield _RayTaskPool(ray, store, url, kind or EVAL_TASKS, options, in_flight, parameters)
 
 
 class _RayTaskPool:
-    """Eval tasks in flight as Ray tasks (the :class:`twisted.experiments.runner.TaskPool` of Ray)."""
+    """Tasks in flight as Ray tasks (the :class:`twisted.experiments.scheduler.TaskPool` of Ray)."""
 
     def __init__(
         self,
         ray: Any,
         store: Store,
         url: str,
-        workers: int,
-        max_retries: int,
+        kind: TaskKind,
+        options: dict[str, Any],
         in_flight: int,
         parameters: dict[str, Any],
     ) -> None:
-        from twisted.experiments.runner import run_task
-
-        self.ray, self.store, self.url = ray, store, url
+        """``kind.run`` becomes a Ray task with ``options`` (its CPUs and retries)."""
+        self.ray, self.store, self.url, self.kind = ray, store, url, kind
         self.in_flight, self.parameters = in_flight, parameters
-        self._remote = ray.remote(num_cpus=workers, max_retries=max_retries)(run_task)
+        self._remote = ray.remote(**options)(kind.run)
         gone_errors, task_errors = _ray_errors(ray)
         self._lost = (*gone_errors, *task_errors)
-        self._pending: dict[Any, Any] = {}  # object ref -> EvalTask
+        self._pending: dict[Any, Any] = {}  # object ref -> task
 
     @property
     def running(self) -> int:
@@ -559,8 +565,6 @@ class _RayTaskPool:
         self._pending[self._remote.remote(self.url, task)] = task
 
     def wait(self, timeout_s: float) -> list[Any]:
-        from twisted.experiments.runner import TaskOutcome, free_row
-
         outcomes = []
         ready, _ = self.ray.wait(list(self._pending), num_returns=1, timeout=timeout_s)
         for ref in ready:
@@ -569,13 +573,12 @@ class _RayTaskPool:
                 outcomes.append(self.ray.get(ref))
             except self._lost as exc:
                 text = f"Ray task lost ({type(exc).__name__}): {str(exc).strip().splitlines()[0][:300]}"
-                free_row(self.store, task, text)  # the worker died holding the row: free it for a rerun
-                outcomes.append(TaskOutcome(task.goal_key, task.seed, "failed", message=text))
+                outcomes.append(self.kind.lost(self.store, task, "failed", text))  # an eval frees its row
         return outcomes
 
     def cancel_all(self) -> list[Any]:
         """Ask the tasks to stop (KeyboardInterrupt in the task: the planner checkpoints), wait for them."""
-        from twisted.experiments.runner import CANCEL_WAIT_S, POLL_S, TaskOutcome
+        from twisted.experiments.scheduler import CANCEL_WAIT_S, POLL_S
 
         for ref in self._pending:
             self.ray.cancel(ref, force=False)
@@ -588,7 +591,7 @@ class _RayTaskPool:
                 try:
                     outcomes.append(self.ray.get(ref))
                 except Exception:  # noqa: BLE001 - cancelled before it started, or died: nothing stored
-                    outcomes.append(TaskOutcome(task.goal_key, task.seed, "interrupted"))
+                    outcomes.append(self.kind.lost(self.store, task, "interrupted", "cancelled"))
         for ref in self._pending:
             self.ray.cancel(ref, force=True)
         self._pending.clear()

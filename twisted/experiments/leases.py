@@ -14,59 +14,27 @@ import os
 import socket
 import time
 import traceback
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import Any
 
 from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 
-from twisted.store.experiments import FINISHED_STATUSES, EvalResult, pid_alive
+from twisted.experiments.tasks import EvalSummary, EvalTask, PreparedEval, TaskKind, TaskOutcome
+from twisted.store.experiments import FINISHED_STATUSES, EvalResult, pid_alive, start_eval_run
 from twisted.store.models import utcnow
 
-if TYPE_CHECKING:
-    from twisted.experiments.runner import PreparedEval
-
 __all__ = [
-    "EvalTask",
-    "TaskOutcome",
+    "EVAL_TASKS",
     "claim",
     "free_row",
+    "lost_task",
     "pending_tasks",
     "result_key",
     "run_task",
     "set_row",
+    "start_eval",
 ]
-
-
-@dataclass(frozen=True)
-class EvalTask:
-    """One (goal, seed) to run; ``resume_run_id`` continues an interrupted planner run."""
-
-    eval_run_id: int
-    set_id: int
-    problem_id: int
-    goal_key: str
-    planner: str  # the planner kind (twisted, random-low, low-level-only)
-    label: str  # what the results are stored under (eval_results.planner), e.g. "twisted-rnd"
-    seed: int
-    timeout_s: float
-    friction_scale: float
-    workers: int
-    options: dict[str, Any] = field(default_factory=dict)
-    resume_run_id: int | None = None
-
-
-@dataclass(frozen=True)
-class TaskOutcome:
-    """What one task ended with (``skipped``: another process holds it or it was done meanwhile)."""
-
-    goal_key: str
-    seed: int
-    status: str  # solved | timeout | interrupted | failed | skipped
-    time_to_solve_s: float | None = None
-    sim_calls: int | None = None
-    plan_run_id: int | None = None
-    message: str | None = None
 
 
 def result_key(task: EvalTask) -> Any:
@@ -265,3 +233,38 @@ def free_row(store: Any, task: EvalTask, message: str) -> None:
             .where(result_key(task) & (EvalResult.status == "running"))
             .values(status="interrupted", message=message)
         )
+
+
+def lost_task(store: Any, task: EvalTask, status: str, message: str) -> TaskOutcome:
+    """The outcome of a task that ended without reporting; the row of a worker that died is freed."""
+    if status == "failed":
+        free_row(store, task, message)
+    return TaskOutcome(task.goal_key, task.seed, status, message=message)
+
+
+def start_eval(
+    store: Any, prepared: PreparedEval, parallel: int, parameters: Mapping[str, Any] | None = None
+) -> tuple[EvalSummary, list[EvalTask]]:
+    """Store a new ``running`` eval run of ``prepared``; its summary and the tasks still to run.
+
+    The run's parameters are the planner options, the planner kind and ``parameters``.
+    """
+    with store.session(write=True) as session:
+        eval_run_id = start_eval_run(
+            session,
+            set_id=prepared.record.id,
+            planner=prepared.label,
+            timeout_s=prepared.timeout_s,
+            friction_scale=prepared.friction_scale,
+            seeds=prepared.seeds,
+            workers=prepared.workers,
+            parallel=parallel,
+            parameters={**prepared.options, "planner": prepared.planner, **(parameters or {})},
+        )
+    with store.session() as session:
+        tasks, done = pending_tasks(session, prepared, eval_run_id)
+    return EvalSummary(eval_run_id, prepared.set_name, prepared.label, prepared.total, done), tasks
+
+
+# What the scheduler's pools run for an evaluation (the default kind of every backend)
+EVAL_TASKS = TaskKind(run_task, lost_task)

@@ -8,7 +8,8 @@ to run (:func:`twisted.experiments.leases.pending_tasks`) to the one scheduler
 (set, planner label, goal, seed, timeout_s, friction_scale), runs the planner and stores the outcome;
 a rerun skips finished rows and continues interrupted ones from the planner's own checkpoint.
 
-The names of the other modules listed below are re-exported here, where the commands and
+The types the parts share are in :mod:`twisted.experiments.tasks`. The names of the other modules
+listed below are re-exported here, where the commands and
 ``twisted.distributed`` find the evaluation's parts.
 """
 
@@ -20,18 +21,18 @@ from dataclasses import dataclass
 from typing import Any
 
 from twisted.experiments.labels import check_label_options, default_label, result_options
-from twisted.experiments.leases import EvalTask, TaskOutcome, free_row, pending_tasks, result_key, run_task
+from twisted.experiments.leases import free_row, pending_tasks, result_key, run_task
 from twisted.experiments.problems import EvalInputError
 from twisted.experiments.scheduler import (
     CANCEL_WAIT_S,
     POLL_S,
     EvalBackend,
-    EvalSummary,
     ProcessBackend,
     TaskPool,
     schedule,
 )
-from twisted.store.experiments import ProblemSetRecord, load_problem_set, start_eval_run
+from twisted.experiments.tasks import EvalSummary, EvalTask, PreparedEval, TaskOutcome
+from twisted.store.experiments import load_problem_set
 
 __all__ = [
     "CANCEL_WAIT_S",
@@ -68,50 +69,6 @@ class EvalOptions:
     parallel: int | None = None  # tasks at once; None: the backend's smallest (``min_parallel``)
     planner_options: Mapping[str, Any] | None = None  # e.g. heuristic, model_id
     label: str | None = None  # what the results are stored under (default: planner[-heuristic])
-
-
-@dataclass(frozen=True)
-class PreparedEval:
-    """The checked inputs of one evaluation (:func:`run_eval`)."""
-
-    set_name: str
-    planner: str  # the planner kind (a key of ``twisted.planner.PLANNERS``)
-    label: str  # what the results are stored under
-    options: dict[str, Any]  # planner options; ``model_id`` resolved for the twisted planner
-    record: ProblemSetRecord
-    timeout_s: float
-    seeds: Sequence[int]
-    friction_scale: float
-    workers: int
-    parallel: int  # tasks at once (0: as many as the backend has room for)
-
-    @property
-    def total(self) -> int:
-        """Number of tasks of the evaluation: goals x seeds."""
-        return len(self.record.problems) * len(self.seeds)
-
-    def start(
-        self, store: Any, parallel: int, parameters: Mapping[str, Any] | None = None
-    ) -> tuple[EvalSummary, list[EvalTask]]:
-        """Store a new ``running`` eval run; its summary and the tasks still to run.
-
-        The run's parameters are the planner options, the planner kind and ``parameters``.
-        """
-        with store.session(write=True) as session:
-            eval_run_id = start_eval_run(
-                session,
-                set_id=self.record.id,
-                planner=self.label,
-                timeout_s=self.timeout_s,
-                friction_scale=self.friction_scale,
-                seeds=self.seeds,
-                workers=self.workers,
-                parallel=parallel,
-                parameters={**self.options, "planner": self.planner, **(parameters or {})},
-            )
-        with store.session() as session:
-            tasks, done = pending_tasks(session, self, eval_run_id)
-        return EvalSummary(eval_run_id, self.set_name, self.label, self.total, done), tasks
 
 
 def _pull_test_required(parameters: Mapping[str, Any]) -> bool:

@@ -1,8 +1,10 @@
-"""THE eval scheduler (:func:`schedule`) and where its tasks run: ``parallel`` tasks in flight on a
+"""THE eval scheduler (:func:`schedule`) and where tasks run: ``parallel`` tasks in flight on a
 backend (:class:`EvalBackend`), :class:`ProcessBackend` (each task in its own spawned local process) or
-``twisted.distributed.RayBackend`` (a Ray task each). Either way a task is
-:func:`twisted.experiments.leases.run_task`. On Ctrl-C, SIGTERM or an exception the scheduler cancels
-the running tasks (their planners checkpoint) and marks the eval run interrupted or failed.
+``twisted.distributed.RayBackend`` (a Ray task each). What a task is, a pool is told by a
+:class:`TaskKind`: an evaluation's (goal, seed) (:data:`twisted.experiments.leases.EVAL_TASKS`, the
+default) or one search of ``twisted improve`` (:mod:`twisted.experiments.improve`). :func:`run_on`
+keeps a pool busy with a list of tasks; on Ctrl-C, SIGTERM or an exception it cancels the running
+tasks (their planners checkpoint), and :func:`schedule` then marks the eval run interrupted or failed.
 """
 
 from __future__ import annotations
@@ -13,25 +15,23 @@ import os
 import queue as queue_module
 import signal
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
-from twisted.experiments.leases import EvalTask, TaskOutcome, run_task
+from twisted.experiments.leases import EVAL_TASKS, start_eval
+from twisted.experiments.tasks import EvalSummary, PreparedEval, TaskKind, TaskOutcome
 from twisted.runtime import sigterm_as_interrupt
 from twisted.store.experiments import end_eval_run
-
-if TYPE_CHECKING:
-    from twisted.experiments.runner import PreparedEval
 
 __all__ = [
     "CANCEL_WAIT_S",
     "POLL_S",
     "EvalBackend",
-    "EvalSummary",
     "ProcessBackend",
+    "TaskKind",
     "TaskPool",
+    "run_on",
     "schedule",
 ]
 
@@ -43,23 +43,9 @@ CANCEL_WAIT_S = 60.0
 POLL_S = 0.5
 
 
-@dataclass
-class EvalSummary:
-    eval_run_id: int
-    set_name: str
-    planner: str
-    total: int  # goals x seeds
-    already_done: int  # finished before this invocation
-    outcomes: list[TaskOutcome] = field(default_factory=list)
-    status: str = "running"
-
-    @property
-    def solved(self) -> int:
-        return sum(o.status == "solved" for o in self.outcomes)
-
-
 class TaskPool(Protocol):
-    """Tasks running somewhere, as the scheduler sees them (one pool per eval)."""
+    """Tasks of one :class:`TaskKind` running somewhere, as the scheduler sees them (one pool per eval,
+    or per ``twisted improve`` call)."""
 
     @property
     def in_flight(self) -> int:
@@ -73,18 +59,18 @@ class TaskPool(Protocol):
     def running(self) -> int:
         """Tasks submitted whose outcome has not been returned yet."""
 
-    def submit(self, task: EvalTask) -> None:
+    def submit(self, task: Any) -> None:
         """Start one task."""
 
-    def wait(self, timeout_s: float) -> list[TaskOutcome]:
+    def wait(self, timeout_s: float) -> list[Any]:
         """Outcomes of tasks that finished within ``timeout_s`` (often none, seldom more than one)."""
 
-    def cancel_all(self) -> list[TaskOutcome]:
+    def cancel_all(self) -> list[Any]:
         """Ask the running tasks to stop (their planners checkpoint), wait for them; their outcomes."""
 
 
 class EvalBackend(Protocol):
-    """Where the tasks of an eval run: :class:`ProcessBackend` or ``twisted.distributed.RayBackend``."""
+    """Where tasks run: :class:`ProcessBackend` or ``twisted.distributed.RayBackend``."""
 
     @property
     def name(self) -> str:
@@ -94,68 +80,72 @@ class EvalBackend(Protocol):
     def min_parallel(self) -> int:
         """The smallest ``parallel`` it takes, and the default (0: as many tasks as it has room for)."""
 
-    def open(self, store: Any, db_url: str, workers: int, parallel: int) -> AbstractContextManager[TaskPool]:
-        """A pool for one eval's tasks (each with ``workers`` simulator processes), for the block."""
+    def open(
+        self, store: Any, db_url: str, workers: int, parallel: int, kind: TaskKind = EVAL_TASKS
+    ) -> AbstractContextManager[TaskPool]:
+        """A pool for tasks of ``kind`` (each with ``workers`` simulator processes), for the block."""
 
 
-def _task_process(db_url: str, task: EvalTask, queue: Any) -> None:
-    outcome = run_task(db_url, task)
-    queue.put(outcome)
+def _task_process(run: Callable[[str, Any], Any], db_url: str, key: int, task: Any, queue: Any) -> None:
+    queue.put((key, run(db_url, task)))
 
 
 class _ProcessPool:
     """Each task in its own spawned process, which reports its outcome through a queue."""
 
-    def __init__(self, db_url: str, in_flight: int) -> None:
-        self.db_url, self.in_flight = db_url, in_flight
+    def __init__(self, store: Any, db_url: str, in_flight: int, kind: TaskKind) -> None:
+        self.store, self.db_url, self.in_flight, self.kind = store, db_url, in_flight, kind
         self.parameters: dict[str, Any] = {}
         self._ctx = multiprocessing.get_context("spawn")
         self._queue = self._ctx.Queue()
-        self._procs: dict[tuple[str, int], Any] = {}  # (goal, seed) -> process that has not reported yet
-        self._dead_since: dict[tuple[str, int], float] = {}
+        self._procs: dict[int, tuple[Any, Any]] = {}  # number -> (process that has not reported, task)
+        self._dead_since: dict[int, float] = {}
+        self._submitted = 0
 
     @property
     def running(self) -> int:
         return len(self._procs)
 
-    def submit(self, task: EvalTask) -> None:
-        proc = self._ctx.Process(target=_task_process, args=(self.db_url, task, self._queue), daemon=False)
+    def submit(self, task: Any) -> None:
+        key, self._submitted = self._submitted, self._submitted + 1
+        args = (self.kind.run, self.db_url, key, task, self._queue)
+        proc = self._ctx.Process(target=_task_process, args=args, daemon=False)
         proc.start()
-        self._procs[(task.goal_key, task.seed)] = proc
+        self._procs[key] = (proc, task)
 
-    def wait(self, timeout_s: float) -> list[TaskOutcome]:
+    def wait(self, timeout_s: float) -> list[Any]:
         try:
-            outcome = self._queue.get(timeout=timeout_s)
+            key, outcome = self._queue.get(timeout=timeout_s)
         except queue_module.Empty:
             return self._reap_silent()
-        proc = self._procs.pop((outcome.goal_key, outcome.seed), None)
+        proc, _task = self._procs.pop(key, (None, None))
         if proc is not None:
             proc.join()
         return [outcome]
 
-    def _reap_silent(self) -> list[TaskOutcome]:
+    def _reap_silent(self) -> list[Any]:
         """Children that died without reporting (killed); a clean exit's report may still be in the pipe."""
         lost = []
-        for key, proc in list(self._procs.items()):
+        for key, (proc, task) in list(self._procs.items()):
             if proc.is_alive():
                 continue
             first = self._dead_since.setdefault(key, time.monotonic())
             if proc.exitcode != 0 or time.monotonic() - first > 10.0:
-                self._procs.pop(key).join()
-                lost.append(
-                    TaskOutcome(key[0], key[1], "failed", message=f"worker exited with code {proc.exitcode}")
-                )
+                self._procs.pop(key)
+                proc.join()
+                message = f"worker exited with code {proc.exitcode}"
+                lost.append(self.kind.lost(self.store, task, "failed", message))
         return lost
 
-    def cancel_all(self) -> list[TaskOutcome]:
-        for proc in self._procs.values():
+    def cancel_all(self) -> list[Any]:
+        for proc, _task in self._procs.values():
             if proc.is_alive():
                 os.kill(proc.pid, signal.SIGINT)  # the planner checkpoints and marks its row
         outcomes = []
         deadline = time.monotonic() + CANCEL_WAIT_S
         while self._procs and time.monotonic() < deadline:
             outcomes += self.wait(POLL_S)
-        for proc in self._procs.values():
+        for proc, _task in self._procs.values():
             proc.kill()
             proc.join()
         self._procs.clear()
@@ -169,8 +159,41 @@ class ProcessBackend:
     min_parallel = 1
 
     @contextmanager
-    def open(self, store: Any, db_url: str, workers: int, parallel: int) -> Iterator[TaskPool]:
-        yield _ProcessPool(db_url, parallel)
+    def open(
+        self, store: Any, db_url: str, workers: int, parallel: int, kind: TaskKind = EVAL_TASKS
+    ) -> Iterator[TaskPool]:
+        yield _ProcessPool(store, db_url, parallel, kind)
+
+
+def run_on(
+    pool: TaskPool,
+    tasks: Sequence[Any],
+    on_outcome: Callable[[Any], None],
+    *,
+    may_start: Callable[[Any], bool] | None = None,
+    on_cancelled: Callable[[list[Any]], None] | None = None,
+) -> bool:
+    """Run ``tasks`` in order on ``pool``, ``pool.in_flight`` at once, passing each outcome to
+    ``on_outcome`` as it comes; False when ``may_start(task)`` refused a task (none is started after
+    it). On any exception (Ctrl-C included) the running tasks are cancelled, their outcomes passed to
+    ``on_cancelled``, and the exception propagates."""
+    queued = list(reversed(tasks))
+    started_all = True
+    try:
+        while queued or pool.running:
+            while queued and pool.running < pool.in_flight:
+                if may_start is not None and not may_start(queued[-1]):
+                    queued, started_all = [], False
+                    break
+                pool.submit(queued.pop())
+            for outcome in pool.wait(POLL_S):
+                on_outcome(outcome)
+    except BaseException:
+        cancelled = pool.cancel_all()
+        if on_cancelled is not None:
+            on_cancelled(cancelled)
+        raise
+    return started_all
 
 
 def _log_outcome(eval_run_id: int, label: str, outcome: TaskOutcome) -> None:
@@ -207,7 +230,7 @@ def schedule(
     rows become ``interrupted``), the eval run is marked interrupted (failed for an exception) and the
     exception propagates; running the same eval again continues.
     """
-    summary, tasks = prepared.start(store, pool.in_flight, pool.parameters)
+    summary, tasks = start_eval(store, prepared, pool.in_flight, pool.parameters)
     log.info(
         "eval run %d started: set %s, planner %s (%s), seeds %s, timeout %g s, friction %g, workers %d; "
         "%d of %d tasks to run (%d finished before), %d at once on %s",
@@ -227,28 +250,26 @@ def schedule(
     )
     if on_start is not None:
         on_start(summary, len(tasks))
-    queued = list(reversed(tasks))
+
+    def outcome_in(outcome: TaskOutcome) -> None:
+        summary.outcomes.append(outcome)
+        _log_outcome(summary.eval_run_id, prepared.label, outcome)
+        if on_outcome is not None:
+            on_outcome(outcome, summary)
+
+    def cancelled_in(cancelled: list[TaskOutcome]) -> None:
+        log.info("eval run %d: stopping, %d running tasks cancelled", summary.eval_run_id, len(cancelled))
+        for outcome in cancelled:
+            _log_outcome(summary.eval_run_id, prepared.label, outcome)
+        summary.outcomes.extend(cancelled)
+
     status, message = "finished", None
     with sigterm_as_interrupt():
         try:
-            while queued or pool.running:
-                while queued and pool.running < pool.in_flight:
-                    pool.submit(queued.pop())
-                for outcome in pool.wait(POLL_S):
-                    summary.outcomes.append(outcome)
-                    _log_outcome(summary.eval_run_id, prepared.label, outcome)
-                    if on_outcome is not None:
-                        on_outcome(outcome, summary)
+            run_on(pool, tasks, outcome_in, on_cancelled=cancelled_in)
         except BaseException as exc:
             status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "failed"
             message = None if status == "interrupted" else repr(exc)
-            log.info(
-                "eval run %d: stopping (%s), cancelling %d tasks", summary.eval_run_id, status, pool.running
-            )
-            cancelled = pool.cancel_all()
-            for outcome in cancelled:
-                _log_outcome(summary.eval_run_id, prepared.label, outcome)
-            summary.outcomes.extend(cancelled)
             raise
         finally:
             summary.status = status
