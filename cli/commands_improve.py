@@ -141,21 +141,13 @@ def improve_status_command(
     ctx: typer.Context, name: str = typer.Option("improve", "--name", help="The lineage.")
 ) -> None:
     """The generations of an expert-iteration lineage: data, training goals solved, tuning scores."""
-    from sqlalchemy import select
+    from twisted.store.improve import lineage_rows
 
-    from twisted.store.improve import ImproveGeneration
-
-    with open_db(ctx) as store, store.session() as session:
-        rows = list(
-            session.scalars(
-                select(ImproveGeneration)
-                .where(ImproveGeneration.lineage == name)
-                .order_by(ImproveGeneration.generation)
-            )
-        )
-        if not rows:
-            fail(f"--name {name}: no such lineage in the database")
-        _print_generations(rows)
+    with open_db(ctx) as store:
+        rows = lineage_rows(store, name)
+    if not rows:
+        fail(f"--name {name}: no such lineage in the database")
+    _print_generations(rows)
 
 
 @problems_app.command("export")

@@ -41,13 +41,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import func, select
 
 from twisted.experiments.problems import EvalInputError, decode_goal_file, parse_goal_file
 from twisted.goals import Goal, make_goal, state_goal
-from twisted.store.experiments import EvalResult, Problem, ProblemSet
-from twisted.store.improve import ImproveGeneration
-from twisted.store.models import utcnow
+from twisted.store.improve import (
+    ImproveGeneration,
+    add_generation,
+    lineage_rows,
+    model_of_training_run,
+    problem_set_names,
+    set_goal_specs,
+    shipped_model_id,
+    training_run_status,
+    update_generation,
+)
 
 __all__ = [
     "DISTRIBUTIONS",
@@ -167,8 +174,8 @@ class ImproveConfig:
 def evaluation_set_names(session: Any, tune_set: str | None = None) -> list[str]:
     """Stored sets that are evaluation sets: with evaluation results, or named ``final-`` / ``eval-`` /
     ``tune-``; and the tuning set."""
-    used = set(session.scalars(select(ProblemSet.name).join(EvalResult, EvalResult.set_id == ProblemSet.id)))
-    named = {n for n in session.scalars(select(ProblemSet.name)) if n.startswith(EVALUATION_PREFIXES)}
+    used = set(problem_set_names(session, evaluated=True))
+    named = {n for n in problem_set_names(session) if n.startswith(EVALUATION_PREFIXES)}
     if tune_set is not None:
         named.add(tune_set)
     return sorted(used | named)
@@ -199,12 +206,7 @@ def evaluation_goal_keys(
     files) and the names of the stored sets they come from."""
     names = evaluation_set_names(session, tune_set)
     keys: set[str] = set()
-    specs = session.scalars(
-        select(Problem.goal_key)
-        .join(ProblemSet, ProblemSet.id == Problem.set_id)
-        .where(ProblemSet.name.in_(names))
-    ).all()
-    for spec in specs:
+    for spec in set_goal_specs(session, names):
         keys.update(make_goal(spec).keys)
     for goals in _file_goals(goalsets_dir or COMMITTED_GOALSETS).values():
         for goal in goals:
@@ -240,14 +242,9 @@ def training_goals(
 
 
 def _set_goals(session: Any, name: str) -> list[Goal]:
-    specs = session.scalars(
-        select(Problem.goal_key)
-        .join(ProblemSet, ProblemSet.id == Problem.set_id)
-        .where(ProblemSet.name == name)
-        .order_by(Problem.idx)
-    ).all()
+    specs = set_goal_specs(session, [name])
     if not specs:
-        known = sorted(session.scalars(select(ProblemSet.name)))
+        known = problem_set_names(session)
         raise EvalInputError(
             f"no problem set named {name!r} (the database has: {', '.join(known) or 'none'})"
         )
@@ -289,16 +286,11 @@ class _Context:
 def _shipped_model_id(store: Any) -> int:
     """The shipped model stored as ``shipped`` (once per database); EvalInputError on a rope it is not for."""
     from twisted.model.registry import ModelError, load_default_model, save_model
-    from twisted.store.training import TrainedModel
 
     with store.session() as session:
-        found = session.scalar(
-            select(func.min(TrainedModel.id)).where(
-                TrainedModel.name == "shipped", TrainedModel.training_run_id.is_(None)
-            )
-        )
+        found = shipped_model_id(session)
     if found is not None:
-        return int(found)
+        return found
     try:
         shipped = load_default_model("a lineage starts from the shipped model without --init-model, but ")
     except ModelError as exc:
@@ -306,53 +298,27 @@ def _shipped_model_id(store: Any) -> int:
     return save_model(store, shipped, name="shipped")
 
 
-def _rows(store: Any, lineage: str) -> list[ImproveGeneration]:
-    with store.session() as session:
-        rows = session.scalars(
-            select(ImproveGeneration)
-            .where(ImproveGeneration.lineage == lineage)
-            .order_by(ImproveGeneration.generation)
-        ).all()
-        session.expunge_all()
-        return list(rows)
-
-
-def _update(store: Any, row_id: int, **values: Any) -> None:
-    with store.session(write=True) as session:
-        row = session.get(ImproveGeneration, row_id)
-        assert row is not None
-        for k, v in values.items():
-            setattr(row, k, v)
-        row.updated_at = utcnow()
-
-
 def _new_generation(
     store: Any, config: ImproveConfig, generation: int, parent: int | None
 ) -> ImproveGeneration:
-    with store.session(write=True) as session:
-        row = ImproveGeneration(
-            lineage=config.lineage,
-            generation=generation,
-            status="scoring" if generation == 0 else "planning",
-            seed=config.seed,
-            parameters=config.to_dict(),
-            parent_model_id=parent,
-            model_id=parent if generation == 0 else None,
-            training_goals=[],
-            data={},
-            tune_set=config.tune_set,
-            tune_results=[],
-            tune_runs=0,
-            tune_solved=0,
-            tune_calls=0,
-            wall_s=0.0,
-            created_at=utcnow(),
-            updated_at=utcnow(),
-        )
-        session.add(row)
-        session.flush()
-        session.expunge(row)
-        return row
+    return add_generation(
+        store,
+        lineage=config.lineage,
+        generation=generation,
+        status="scoring" if generation == 0 else "planning",
+        seed=config.seed,
+        parameters=config.to_dict(),
+        parent_model_id=parent,
+        model_id=parent if generation == 0 else None,
+        training_goals=[],
+        data={},
+        tune_set=config.tune_set,
+        tune_results=[],
+        tune_runs=0,
+        tune_solved=0,
+        tune_calls=0,
+        wall_s=0.0,
+    )
 
 
 def _id(model_id: int | None) -> int:
@@ -477,7 +443,7 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
             goals = training_goals(
                 config.distributions, config.goals, config.seed, row.generation, ctx.eval_keys
             )
-        _update(ctx.store, row.id, data={**(row.data or {}), "goals": [g.spec for g in goals]})
+        update_generation(ctx.store, row.id, data={**(row.data or {}), "goals": [g.spec for g in goals]})
         row.data = {**(row.data or {}), "goals": [g.spec for g in goals]}
     specs = list(row.data["goals"])
     goals = [make_goal(spec) for spec in specs]
@@ -503,11 +469,11 @@ def _phase_plan(ctx: _Context, row: ImproveGeneration) -> bool:
     def record(outcome: dict[str, Any]) -> None:
         done.append(outcome)
         done.sort(key=lambda o: int(o["index"]))
-        _update(ctx.store, row.id, training_goals=list(done))
+        update_generation(ctx.store, row.id, training_goals=list(done))
 
     if not _plan_all(ctx, jobs, record):
         return False
-    _update(ctx.store, row.id, training_goals=done, status="training")
+    update_generation(ctx.store, row.id, training_goals=done, status="training")
     return True
 
 
@@ -520,15 +486,12 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
     from twisted.model.config import TrainConfig
     from twisted.model.data import max_transition_id
     from twisted.model.train import train
-    from twisted.store.training import TrainingRun
-
     config = ctx.config
     if config.device == "cpu":
         torch.set_num_threads(1)  # one core: the loop is measured on one
     if row.training_run_id is not None:
         with ctx.store.session() as session:
-            run = session.get(TrainingRun, row.training_run_id)
-            status = None if run is None else run.status
+            status = training_run_status(session, row.training_run_id)
         if status == "finished":
             return _after_training(ctx, row)
         ctx.say(f"generation {row.generation}: resuming training run {row.training_run_id}")
@@ -558,7 +521,7 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
             device=config.device,
             log=ctx.say,
         )
-        _update(ctx.store, row.id, training_run_id=outcome.training_run_id)
+        update_generation(ctx.store, row.id, training_run_id=outcome.training_run_id)
         row.training_run_id = outcome.training_run_id
     if outcome.status != "finished" or outcome.model_id is None:
         return False
@@ -566,15 +529,12 @@ def _phase_train(ctx: _Context, row: ImproveGeneration) -> bool:
 
 
 def _after_training(ctx: _Context, row: ImproveGeneration) -> bool:
-    from twisted.store.training import TrainedModel
-
+    assert row.training_run_id is not None
     with ctx.store.session() as session:
-        model = session.scalar(
-            select(TrainedModel).where(TrainedModel.training_run_id == row.training_run_id)
-        )
-        assert model is not None
-        metrics = dict(model.metrics or {})
-        model_id = int(model.id)
+        made = model_of_training_run(session, row.training_run_id)
+    if made is None:
+        raise RuntimeError(f"training run {row.training_run_id} finished without a model")
+    model_id, metrics = made
     data = {
         **(row.data or {}),
         **{k: v for k, v in metrics.items() if k.startswith(("n_train", "n_val"))},
@@ -582,7 +542,7 @@ def _after_training(ctx: _Context, row: ImproveGeneration) -> bool:
         "val_loss": metrics.get("val_loss"),
         "val_link_accuracy": metrics.get("val_link_accuracy"),
     }
-    _update(ctx.store, row.id, model_id=model_id, data=data, status="scoring")
+    update_generation(ctx.store, row.id, model_id=model_id, data=data, status="scoring")
     row.model_id, row.data = model_id, data
     return True
 
@@ -616,7 +576,7 @@ def _phase_score(ctx: _Context, row: ImproveGeneration) -> bool:
     def record(outcome: dict[str, Any]) -> None:
         results.append(outcome)
         results.sort(key=lambda o: int(o["index"]))
-        _update(
+        update_generation(
             ctx.store,
             row.id,
             tune_results=list(results),
@@ -627,7 +587,7 @@ def _phase_score(ctx: _Context, row: ImproveGeneration) -> bool:
 
     if not _plan_all(ctx, jobs, record):
         return False
-    _update(ctx.store, row.id, status="finished")
+    update_generation(ctx.store, row.id, status="finished")
     return True
 
 
@@ -647,7 +607,7 @@ def improve(
             _check_train_set(
                 _set_goals(session, config.train_set), config.train_set, ctx.eval_keys, ctx.hold_out
             )
-    rows = _rows(store, config.lineage)
+    rows = lineage_rows(store, config.lineage)
     if rows and rows[0].parameters.get("tune_set") != config.tune_set:
         raise EvalInputError(
             f"lineage {config.lineage!r} is scored on {rows[0].parameters.get('tune_set')!r}, not "
@@ -668,8 +628,8 @@ def improve(
             row.status = "scoring" if ok else row.status
         if ok and row.status == "scoring":
             ok = _phase_score(ctx, row)
-        _update(store, row.id, wall_s=float(row.wall_s or 0.0) + time.monotonic() - t0)
+        update_generation(store, row.id, wall_s=float(row.wall_s or 0.0) + time.monotonic() - t0)
         if not ok or ctx.out_of_time() or row.generation >= config.generations:
             break
         rows.append(_new_generation(store, config, row.generation + 1, row.model_id))
-    return _rows(store, config.lineage)
+    return lineage_rows(store, config.lineage)

@@ -7,11 +7,18 @@ scored on the tuning set. The row holds the models (parent and new), the trainin
 generation planned (``training_goals``: per goal its key, run, outcome and calls), the data counts and
 the tuning-set scores (``tune_results``: per goal and seed); ``status`` says which phase a resumed loop
 continues with.
+
+The queries of ``twisted improve`` (:mod:`twisted.experiments.improve`) are the named functions
+below: the lineage's rows (:func:`lineage_rows`, :func:`add_generation`, :func:`update_generation`),
+the sets whose goals it never trains on (:func:`problem_set_names`, :func:`set_goal_specs`), and the
+models it starts from and makes (:func:`shipped_model_id`, :func:`training_run_status`,
+:func:`model_of_training_run`).
 """
 
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Sequence
 from typing import Any
 
 from sqlalchemy import (
@@ -23,13 +30,28 @@ from sqlalchemy import (
     Integer,
     String,
     UniqueConstraint,
+    func,
+    select,
 )
 from sqlalchemy.orm import Mapped, mapped_column
 
-from twisted.store import training as _training  # noqa: F401  (the models and training_runs tables named below)
+from twisted.store.experiments import EvalResult, Problem, ProblemSet
 from twisted.store.models import Base, utcnow
+from twisted.store.training import TrainedModel, TrainingRun
 
-__all__ = ["IMPROVE_STATUSES", "ImproveGeneration", "lineage_labels"]
+__all__ = [
+    "IMPROVE_STATUSES",
+    "ImproveGeneration",
+    "add_generation",
+        "lineage_labels",
+    "lineage_rows",
+    "model_of_training_run",
+    "problem_set_names",
+    "set_goal_specs",
+    "shipped_model_id",
+    "training_run_status",
+    "update_generation",
+]
 
 # planning (toward training goals) -> training -> scoring (tuning set) -> finished
 IMPROVE_STATUSES = ("planning", "training", "scoring", "finished")
@@ -65,8 +87,6 @@ class ImproveGeneration(Base):
 
 def lineage_labels(session: Any) -> dict[int, str]:
     """``model id -> "LINEAGE gN (parent M)"`` for every model a generation made or started from."""
-    from sqlalchemy import select
-
     out: dict[int, str] = {}
     rows = session.execute(
         select(
@@ -83,3 +103,78 @@ def lineage_labels(session: Any) -> dict[int, str]:
         label = f"{lineage} g{generation}{parent_text}"
         out[model_id] = f"{out[model_id]}, {label}" if model_id in out else label
     return out
+
+
+def lineage_rows(store: Any, lineage: str) -> list[ImproveGeneration]:
+    """The generations of ``lineage`` in order (detached rows)."""
+    with store.session() as session:
+        rows = session.scalars(
+            select(ImproveGeneration)
+            .where(ImproveGeneration.lineage == lineage)
+            .order_by(ImproveGeneration.generation)
+        ).all()
+        session.expunge_all()
+        return list(rows)
+
+
+def add_generation(store: Any, **values: Any) -> ImproveGeneration:
+    """Store a new generation row with ``values`` (its columns); the detached row."""
+    with store.session(write=True) as session:
+        row = ImproveGeneration(**values, created_at=utcnow(), updated_at=utcnow())
+        session.add(row)
+        session.flush()
+        session.expunge(row)
+        return row
+
+
+def update_generation(store: Any, row_id: int, **values: Any) -> None:
+    """Set columns of the generation ``row_id`` (and its ``updated_at``)."""
+    with store.session(write=True) as session:
+        row = session.get(ImproveGeneration, row_id)
+        if row is None:
+            raise LookupError(f"no improve generation {row_id}")
+        for k, v in values.items():
+            setattr(row, k, v)
+        row.updated_at = utcnow()
+
+
+def problem_set_names(session: Any, evaluated: bool = False) -> list[str]:
+    """The names of the stored problem sets (``evaluated``: only those with evaluation results), sorted."""
+    query = select(ProblemSet.name).distinct().order_by(ProblemSet.name)
+    if evaluated:
+        query = query.join(EvalResult, EvalResult.set_id == ProblemSet.id)
+    return list(session.scalars(query))
+
+
+def set_goal_specs(session: Any, names: Sequence[str]) -> list[str]:
+    """The goal specs of the stored sets ``names``, set by set in each set's order."""
+    return list(
+        session.scalars(
+            select(Problem.goal_key)
+            .join(ProblemSet, ProblemSet.id == Problem.set_id)
+            .where(ProblemSet.name.in_(list(names)))
+            .order_by(ProblemSet.name, Problem.idx)
+        )
+    )
+
+
+def shipped_model_id(session: Any) -> int | None:
+    """The id of the shipped model stored as ``shipped`` (not made by a training run), if it is."""
+    found = session.scalar(
+        select(func.min(TrainedModel.id)).where(
+            TrainedModel.name == "shipped", TrainedModel.training_run_id.is_(None)
+        )
+    )
+    return None if found is None else int(found)
+
+
+def training_run_status(session: Any, training_run_id: int) -> str | None:
+    """The status of a training run (None when there is no such run)."""
+    run = session.get(TrainingRun, training_run_id)
+    return None if run is None else str(run.status)
+
+
+def model_of_training_run(session: Any, training_run_id: int) -> tuple[int, dict[str, Any]] | None:
+    """(id, metrics) of the model a training run made, or None."""
+    model = session.scalar(select(TrainedModel).where(TrainedModel.training_run_id == training_run_id))
+    return None if model is None else (int(model.id), dict(model.metrics or {}))
