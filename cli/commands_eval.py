@@ -23,6 +23,7 @@ from cli.app import (
 from cli.options import (
     DEFAULT_SEEDS,
     Seeds,
+    checked_ray_address,
     json_option,
     print_json,
     ray_address_argument,
@@ -170,15 +171,9 @@ def eval_command(
     search_options: dict[str, Any],
 ) -> None:
     """Run a planner on every goal of a set; results are stored, a rerun continues where it stopped."""
-    from twisted.distributed import DistributedError, import_ray, resolve_address
     from twisted.experiments import EvalOptions
 
-    try:
-        ray_address = resolve_address(use_ray, ray_address)
-        if use_ray:
-            import_ray()
-    except DistributedError as exc:
-        fail(str(exc))
+    ray_address = checked_ray_address(use_ray, ray_address)
     check_workers(workers)
     if not use_ray:
         check_workers(parallel or None, "--parallel")

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from cli.app import app, console, err_console, fail, open_db, seed_option, unwritable
 from cli.commands_problems import problems_app
-from cli.options import parse_device
+from cli.options import checked_ray_address, parse_device, ray_address_argument
 
 Draw = Annotated[
     list[str] | None,
@@ -61,16 +61,23 @@ def improve_command(
         None, "--init-model", help="Generation 0's model (default: the shipped model, stored as 'shipped')."
     ),
     goalsets: Goalsets = None,
-    parallel: int = typer.Option(
-        1, "--parallel", help="Searches at once, each its own process on one core (training and tuning)."
+    parallel: int | None = typer.Option(
+        None, "--parallel", help="Searches at once, one core each (default 1; --ray: 0, the cluster's CPUs)."
     ),
     device: Device = "cpu",
+    use_ray: bool = typer.Option(
+        False, "--ray", help="Run each generation's searches as tasks on a Ray cluster, as eval --ray does."
+    ),
+    ray_address: str | None = ray_address_argument(),
 ) -> None:
     """Expert iteration: plan toward drawn training goals, fine-tune on the trees, score on a tuning set;
     each generation is a row of improve_generations (`twisted improve-status`)."""
+    from twisted.distributed import DistributedError, RayBackend
     from twisted.experiments.improve import ImproveConfig, improve
     from twisted.experiments.problems import EvalInputError
 
+    address = checked_ray_address(use_ray, ray_address)  # exit 2: an address without --ray, Ray missing
+    backend = RayBackend(address) if use_ray else None  # the eval scheduler's Ray backend
     config = ImproveConfig(
         tune_set=tune_set,
         lineage=name,
@@ -90,17 +97,17 @@ def improve_command(
         batch_size=batch_size,
         init_model_id=init_model,
         goalsets_dir=None if goalsets is None else str(goalsets),
-        parallel=parallel,
+        parallel=(0 if use_ray else 1) if parallel is None else parallel,
         device=device,
     )
     try:
-        config.check()
+        config.check(0 if use_ray else 1)
     except EvalInputError as exc:
         fail(str(exc))
     with open_db(ctx) as store:
         try:
-            rows = improve(store, config, say=lambda m: err_console.print(m, highlight=False))
-        except EvalInputError as exc:
+            rows = improve(store, config, lambda m: err_console.print(m, highlight=False), backend)
+        except (EvalInputError, DistributedError) as exc:
             fail(str(exc))
     _print_generations(rows)
 

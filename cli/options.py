@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 
 import typer
 
-from cli.app import MAX_SEED, shorten
+from cli.app import MAX_SEED, fail, shorten
 from twisted.model.config import DEVICES, LINK_HEADS, SOURCES, NetConfig, TrainConfig
 from twisted.planner.options import OptionSpec, result_options, specs
 
@@ -214,6 +214,20 @@ def json_option(what: str, panel: str | None = None) -> Any:
 def print_json(data: Any, *, indent: int | None = 2) -> None:
     """What ``--json`` prints: ``data`` as one JSON document on stdout (dates and paths as text)."""
     typer.echo(json.dumps(data, default=str, indent=indent))
+
+
+def checked_ray_address(use_ray: bool, address: str | None) -> str | None:
+    """``--ray [ADDRESS]`` checked (exit 2 on an address without --ray, or --ray without Ray installed);
+    the address (None: the cluster ``ray start`` runs here, else a local one)."""
+    from twisted.distributed import DistributedError, import_ray, resolve_address
+
+    try:
+        address = resolve_address(use_ray, address)
+        if use_ray:
+            import_ray()
+    except DistributedError as exc:
+        fail(str(exc))
+    return address
 
 
 def ray_address_argument() -> Any:

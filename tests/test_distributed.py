@@ -299,3 +299,35 @@ def test_cli_eval_with_ray(sqlite_url: str) -> None:
     assert len(rows) == 2 and {r.status for r in rows} <= {"solved", "timeout"}
     result = _cli(*args, "--ray", "--workers", "3")
     assert result.exit_code == 2 and "more than the 2 CPUs" in " ".join(result.output.split())
+
+
+def test_cli_improve_with_ray_runs_each_search_as_a_ray_task(sqlite_url: str, tmp_path: Path) -> None:
+    """`improve --ray`: every search of a generation (three training goals, one tuning goal) is a Ray
+    task of the eval scheduler's backend (its run row made by a Ray worker, not by this process), and
+    the outcomes are recorded under their goals' order."""
+    import json
+
+    from twisted.moves import enumerate_states
+    from twisted.store.improve import lineage_rows
+
+    goals = [p.to_list() for p in enumerate_states(1)[1]]
+    for name, chosen in (("tune-ray", goals[:1]), ("train-ray", goals[1:4])):
+        path = tmp_path / f"{name}.json"
+        content = {"format": "twisted-goal-set/1", "name": name, "seed": 1, "goals": chosen}
+        path.write_text(json.dumps(content))
+        assert _cli("--db", sqlite_url, "problems", "import", str(path)).exit_code == 0
+    (tmp_path / "none").mkdir()
+    args = ["--tune-set", "tune-ray", "--train-set", "train-ray", "--name", "ray", "--generations", "1"]
+    args += ["--goal-iterations", "4", "--tune-iterations", "2", "--epochs", "1", "--batch-size", "16"]
+    result = _cli("--db", sqlite_url, "improve", *args, "--goalsets", str(tmp_path / "none"), "--ray")
+    assert result.exit_code == 0, result.output
+    with open_store(sqlite_url) as store:
+        rows = lineage_rows(store, "ray")
+        with store.session() as session:
+            runs = {r.id: r for r in session.scalars(select(Run))}
+    assert [r.status for r in rows] == ["finished", "finished"]
+    planned = rows[1].training_goals
+    assert [o["index"] for o in planned] == [0, 1, 2] and [o["seed"] for o in planned] == [1000, 1001, 1002]
+    search_runs = [o["run_id"] for r in rows for o in (*r.training_goals, *r.tune_results)]
+    assert len(search_runs) == 5 and all(runs[i].parameters["improve"] == "ray" for i in search_runs)
+    assert all(runs[i].pid not in (None, os.getpid()) for i in search_runs)  # run by Ray workers

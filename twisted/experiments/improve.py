@@ -33,6 +33,7 @@ recorded is not planned again, and an unfinished training run is resumed. Planne
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -43,6 +44,8 @@ from typing import Any
 import numpy as np
 
 from twisted.experiments.problems import EvalInputError, decode_goal_file, parse_goal_file
+from twisted.experiments.scheduler import EvalBackend, ProcessBackend, TaskPool, run_on
+from twisted.experiments.tasks import TaskKind
 from twisted.goals import Goal, make_goal, state_goal
 from twisted.store.improve import (
     ImproveGeneration,
@@ -101,13 +104,15 @@ class ImproveConfig:
     batch_size: int = 128
     init_model_id: int | None = None
     goalsets_dir: str | None = None  # None: COMMITTED_GOALSETS
-    # how it runs, not what it learns: searches at once (each its own spawned process, one core) and the
-    # torch device fine-tuning runs on
+    # how it runs, not what it learns: searches at once (each a task of the eval scheduler's backend, one
+    # core: a spawned local process, or a Ray task; 0 on Ray: one per CPU of the cluster) and the torch
+    # device fine-tuning runs on
     parallel: int = 1
     device: str = "cpu"
 
-    def check(self) -> None:
-        """Raise :class:`EvalInputError` naming the option that is out of range."""
+    def check(self, min_parallel: int = 1) -> None:
+        """Raise :class:`EvalInputError` naming the option that is out of range (``--parallel`` below
+        ``min_parallel``: 1 locally, 0 on Ray)."""
         from twisted.runtime import name_problem
 
         for option, name in (
@@ -129,10 +134,11 @@ class ImproveConfig:
             ("--tune-seeds", self.tune_seeds),
             ("--epochs", self.epochs),
             ("--batch-size", self.batch_size),
-            ("--parallel", self.parallel),
         ):
             if count < 1:
                 raise EvalInputError(f"{name} must be at least 1, got {count}")
+        if self.parallel < min_parallel:
+            raise EvalInputError(f"--parallel must be at least {min_parallel}, got {self.parallel}")
         for name, cap in (
             ("--goal-iterations", self.goal_iterations),
             ("--tune-iterations", self.tune_iterations),
@@ -278,6 +284,7 @@ class _Context:
     say: Callable[[str], None]
     eval_keys: frozenset[str] = frozenset()
     hold_out: list[str] = field(default_factory=list)
+    pool: TaskPool | None = None  # where the searches run; None: one at a time in this process
 
     def out_of_time(self) -> bool:
         return time.monotonic() >= self.deadline
@@ -390,40 +397,41 @@ def _indexed(outcomes: Sequence[dict[str, Any]] | None) -> list[dict[str, Any]]:
     return [{**o, "index": int(o.get("index", i))} for i, o in enumerate(outcomes or [])]
 
 
+def _search_lost(store: Any, job: _Search, status: str, message: str) -> dict[str, Any]:
+    """What a search whose worker ended without reporting leaves: not an outcome (nothing recorded)."""
+    return {"index": job.index, "goal": job.goal, "lost": f"{status}: {message}"}
+
+
+# What the scheduler's pools run for ``twisted improve``: one search each
+SEARCHES = TaskKind(_plan_in_process, _search_lost)
+
+
 def _plan_all(ctx: _Context, jobs: Sequence[_Search], record: Callable[[dict[str, Any]], None]) -> bool:
-    """Run the searches, ``ctx.config.parallel`` at once (one in this process when 1), calling
-    ``record(outcome)`` as each ends; False when the time ran out before every search started."""
-    parallel = ctx.config.parallel
-    if parallel <= 1:
+    """Run the searches (on ``ctx.pool``, else one by one in this process), calling ``record(outcome)``
+    as each ends; False when the time ran out before every search started. A search whose worker died
+    is not recorded: RuntimeError once the others have ended (a rerun plans it again)."""
+
+    def may_start(job: _Search) -> bool:
+        if ctx.out_of_time():
+            return False
+        ctx.say(job.label)
+        return True
+
+    if ctx.pool is None:
         for job in jobs:
-            if ctx.out_of_time():
+            if not may_start(job):
                 return False
-            ctx.say(job.label)
             record(_plan(ctx.store, job))
         return True
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+    lost: list[dict[str, Any]] = []
 
-    db_url = ctx.store.url.render_as_string(hide_password=False)
-    pending = list(jobs)
-    running: set[Future[dict[str, Any]]] = set()
-    started_all = True
-    with ProcessPoolExecutor(
-        max_workers=parallel, mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1
-    ) as pool:
-        while pending or running:
-            while pending and len(running) < parallel:
-                if ctx.out_of_time():
-                    started_all, pending = False, []
-                    break
-                job = pending.pop(0)
-                ctx.say(job.label)
-                running.add(pool.submit(_plan_in_process, db_url, job))
-            if not running:
-                break
-            finished, running = wait(running, return_when=FIRST_COMPLETED)
-            for future in finished:
-                record(future.result())
+    def outcome_in(outcome: dict[str, Any]) -> None:
+        (lost.append if "lost" in outcome else record)(outcome)
+
+    started_all = run_on(ctx.pool, jobs, outcome_in, may_start=may_start)
+    if lost:
+        which = "; ".join(f"search {o['index']} ({o['lost']})" for o in lost)
+        raise RuntimeError(f"{len(lost)} searches ended without an outcome: {which}; run again to plan them")
     return started_all
 
 
@@ -592,13 +600,34 @@ def _phase_score(ctx: _Context, row: ImproveGeneration) -> bool:
 
 
 def improve(
-    store: Any, config: ImproveConfig, say: Callable[[str], None] | None = None
+    store: Any,
+    config: ImproveConfig,
+    say: Callable[[str], None] | None = None,
+    backend: EvalBackend | None = None,
 ) -> list[ImproveGeneration]:
     """Run (or continue) the lineage until ``config.generations`` generations after generation 0 are
-    finished or ``config.hours`` have passed; returns the lineage's rows."""
-    config.check()
-    started = time.monotonic()
-    ctx = _Context(store, config, started + config.hours * 3600.0, say or (lambda _m: None))
+    finished or ``config.hours`` have passed; returns the lineage's rows.
+
+    The searches run on ``backend``, the eval scheduler's (``twisted.distributed.RayBackend``: a Ray
+    task each), ``config.parallel`` at once; without one, in this process one at a time when
+    ``parallel`` is 1, else in spawned local processes (:class:`ProcessBackend`).
+    """
+    config.check(1 if backend is None else backend.min_parallel)
+    ctx = _Context(store, config, time.monotonic() + config.hours * 3600.0, say or (lambda _m: None))
+    rows = _checked_lineage(ctx)  # every input checked before a process or a cluster starts
+    if backend is None and config.parallel > 1:
+        backend = ProcessBackend()
+    with contextlib.ExitStack() as stack:
+        if backend is not None:
+            db_url = store.url.render_as_string(hide_password=False)
+            ctx.pool = stack.enter_context(backend.open(store, db_url, 1, config.parallel, SEARCHES))
+        return _run_lineage(ctx, rows)
+
+
+def _checked_lineage(ctx: _Context) -> list[ImproveGeneration]:
+    """The lineage's rows (generation 0 stored when it is new), after checking the sets, the lineage's
+    tuning set and the model it starts from."""
+    store, config = ctx.store, ctx.config
     with store.session() as session:
         _set_goals(session, config.tune_set)  # the tuning set must exist
         folder = config.goal_files_folder()
@@ -616,6 +645,11 @@ def improve(
     if not rows:
         parent = config.init_model_id if config.init_model_id is not None else _shipped_model_id(store)
         rows = [_new_generation(store, config, 0, parent)]
+    return rows
+
+
+def _run_lineage(ctx: _Context, rows: list[ImproveGeneration]) -> list[ImproveGeneration]:
+    store, config = ctx.store, ctx.config
     while True:
         row = rows[-1]
         t0 = time.monotonic()
