@@ -4,9 +4,12 @@ discretisation.
 - :mod:`~twisted.experiments.problems`: goal sets, drawn from our data by visit frequency (easy,
   medium, hard, unseen-3, 4, 5) or imported from a goal file / a list of knots; ``EvalInputError``.
 - :mod:`~twisted.experiments.runner`: eval runs (``run_eval(store, url, EvalOptions(...))``). Tasks, one
-  (goal, seed) each, are claimed, run with a planner and stored (``run_task``); the one scheduler
-  (``schedule``) keeps them in flight on a backend: ``ProcessBackend`` (local processes) or
-  ``twisted.distributed.RayBackend``.
+  (goal, seed) each, are claimed, run with a planner and stored (:mod:`~twisted.experiments.leases`:
+  ``run_task``); the one scheduler (:mod:`~twisted.experiments.scheduler`: ``schedule``, ``run_on``)
+  keeps them in flight on a backend: ``ProcessBackend`` (local processes) or
+  ``twisted.distributed.RayBackend``; the types they share are :mod:`~twisted.experiments.tasks`.
+- :mod:`~twisted.experiments.improve`: expert iteration (``twisted improve``), its searches on the same
+  backends.
 - :mod:`~twisted.experiments.report`: success-vs-time curves, plots and ``report.md``.
 - :mod:`~twisted.experiments.sensitivity`: friction sensitivity (an eval per scale, one plot per
   planner).
