@@ -32,7 +32,9 @@ draws ``--pairs`` (node, requested next state) pairs that the stored runs tried 
 Prints, per crossing count, class of move (``bench/step_moves.py``'s ``move_class``, and all R1 / all
 Cross) and family, the curves that reached the step's next state (k of n), the pairs reached by any, the
 rate against the one-hand family's, and what the other curves did (fewer crossings than the start, the
-start's state, another state, rejected by the simulator). ``--pictures DIR`` draws, from the highest
+start's state, another state, rejected by the simulator) and, of all curves, those whose rope had more
+crossings than the start when the hands let go, and those that were in the next state then (a step made
+by the carry and lost while the rope settled). ``--pictures DIR`` draws, from the highest
 crossing count, one typical outcome per two-hand family (the start with the carry, the rope when the
 hands let go, the settled rope) as ``DIR/two_hands_FAMILY.png``.
 """
@@ -54,9 +56,11 @@ from twisted.proposals import cross_move_curve, segment_bounds
 from twisted.rope import N_LINKS
 from twisted.sim import Curve, RopeSim
 from twisted.sim.rope import Pin
+from twisted.topology import top
 
 FAMILIES = ("one-hand", "random-pin", "near-pin", "scripted-pin", "place-hold", "both-carry")
 OUTCOMES = ("reached", "fewer", "same", "other", "rejected")
+RELEASE = ("more at release", "next at release")
 
 
 def centres(points: Any) -> np.ndarray:
@@ -325,9 +329,13 @@ def main() -> None:
     for (i, name), (_, curve), result in zip(owner, jobs, results, strict=True):
         pair = chosen[i]
         what = outcome(result[0], result[2], pair)
+        at_release = top(result[4]) if result[4] is not None else None
         for group in (move_class(pair["move"], pair["node"].p_data), f"all {pair['move'].kind}"):
             key = (pair["level"], group, name)
             counts[key][what] += 1
+            if at_release is not None:  # the rope when the hands let go
+                counts[key]["more at release"] += at_release.cross > pair["node"].p_data.cross
+                counts[key]["next at release"] += at_release == pair["next"]
             all_pairs[key].add(i)
             if what == "reached":
                 hit_pairs[key].add(i)
@@ -336,24 +344,24 @@ def main() -> None:
 
     print(f"\nfailed pairs, {args.k} curves per family and pair; seed {args.seed}")
     print("| from | move | family | pairs | curves reached (k of n) | pairs reached | x one-hand | "
-          + " | ".join(OUTCOMES[1:]) + " |")
-    print("| --- | --- | --- | --- | --- | --- | --- |" + " --- |" * (len(OUTCOMES) - 1))
+          + " | ".join(OUTCOMES[1:] + RELEASE) + " |")
+    print("| --- | --- | --- | --- | --- | --- | --- |" + " --- |" * (len(OUTCOMES) + len(RELEASE) - 1))
     figures = []
     for level in levels:
         groups = sorted({g for (lv, g, _) in counts if lv == level}, key=lambda g: (g.startswith("all"), g))
         for group in groups:
             base = counts.get((level, group, "one-hand"), Counter())
-            base_rate = base["reached"] / max(1, sum(base.values()))
+            base_rate = base["reached"] / max(1, sum(base[o] for o in OUTCOMES))
             for name in FAMILIES:
                 c = counts.get((level, group, name))
                 if not c:
                     continue
-                n = sum(c.values())
+                n = sum(c[o] for o in OUTCOMES)
                 rate = c["reached"] / n
                 ratio = "-"
                 if name != "one-hand" and (rate or base_rate):
                     ratio = f"{rate / base_rate:.1f}" if base_rate else "inf"
-                shares = " | ".join(f"{c[o] / n:.0%}" for o in OUTCOMES[1:])
+                shares = " | ".join(f"{c[o] / n:.0%}" for o in OUTCOMES[1:] + RELEASE)
                 npairs = len(all_pairs[(level, group, name)])
                 print(
                     f"| {level} | {group} | {name} | {npairs} | {c['reached']} of {n} ({rate:.2%}) | "
