@@ -27,6 +27,7 @@ from cli.app import (
     app,
     check_workers,
     console,
+    done_before_interrupt,
     err_console,
     fail,
     open_db,
@@ -145,6 +146,8 @@ def plan_command(
     if picture is not None:
         picture = _picture_file(picture)
     search, result, setup_s, exit_code = _search(ctx, request, timeout_s, max_iterations, checkpoint_every_s)
+    if result.solved:
+        done_before_interrupt(f"run {result.run_id} was solved and stored")
     _print_result(search, result, as_json, setup_s)
     if result.solved:
         if picture is not None:

@@ -10,7 +10,16 @@ from __future__ import annotations
 
 import typer
 
-from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, err_console, seed_option
+from cli.app import (
+    EXIT_NOT_REACHED,
+    EXIT_OK,
+    app,
+    done_before_interrupt,
+    err_console,
+    fail,
+    open_db,
+    seed_option,
+)
 from cli.commands_plan import _check, _print_result, _Request, _search
 from cli.options import json_option
 
@@ -65,10 +74,26 @@ def untie_command(
         search_options={"planner": planner, "seed": seed},
     )
     _check(request)
+    if resume:
+        _check_untie_run(ctx, run_id)
     search, result, setup_s, exit_code = _search(ctx, request, timeout_s, max_iterations, checkpoint_every_s)
+    if result.solved:
+        done_before_interrupt(f"run {result.run_id} was solved and stored")
     _print_result(search, result, as_json, setup_s)
     interrupted = result.status == "interrupted"
     if interrupted:
         resume_hint = f"`twisted untie --resume {result.run_id}`"
         err_console.print(f"interrupted: checkpoint saved; continue with {resume_hint}", highlight=False)
     raise typer.Exit(EXIT_OK if result.solved else exit_code if interrupted else EXIT_NOT_REACHED)
+
+
+def _check_untie_run(ctx: typer.Context, run_id: int) -> None:
+    """``--resume RUN_ID``: exit 2 unless the run is an untie run (a tying search is `plan --resume`'s)."""
+    from twisted.planner import PlanInputError
+    from twisted.planner.untie import check_untie_run
+
+    with open_db(ctx, readonly=True, needed_by=f"--resume {run_id}") as store:
+        try:
+            check_untie_run(store, run_id)
+        except PlanInputError as exc:
+            fail(str(exc))

@@ -53,6 +53,7 @@ from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal, PlanInputError, state_goal
 from twisted.runtime import process_alive
+from twisted.store.boundary import StoredValueError, check_checkpoint, get_row, shown, stored_object
 from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
@@ -446,22 +447,13 @@ class DamagedRunError(PlanInputError, LookupError):
 
 
 def _checkpoint(row: SearchCheckpoint | None) -> StoredCheckpoint | None:
+    """A checkpoint as stored, checked at the boundary (StoredValueError naming the field)."""
     if row is None:
         return None
-    return StoredCheckpoint(
-        iteration=row.iteration,
-        elapsed_s=row.elapsed_s,
-        sim_calls=row.sim_calls,
-        nodes=row.nodes,
-        rng_state=_rng_state(json.loads(row.rng_state)),
-        stats=dict(row.stats or {}),
+    iteration, elapsed_s, sim_calls, nodes, rng_state, stats = check_checkpoint(
+        row.run_id, row.iteration, row.elapsed_s, row.sim_calls, row.nodes, row.rng_state, row.stats
     )
-
-
-def _rng_state(state: Any) -> dict[str, Any]:
-    if not isinstance(state, dict):
-        raise ValueError(f"its checkpoint's generator state is {type(state).__name__}, not an object")
-    return state
+    return StoredCheckpoint(iteration, elapsed_s, sim_calls, nodes, rng_state, stats)
 
 
 def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[StoredNode]:
@@ -502,24 +494,24 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
     """A planner run, or None when ``run_id`` is not one. ``with_nodes`` loads the whole tree."""
     with store.session() as session:
         row = session.get(SearchRunRow, run_id)
-        run = session.get(Run, run_id)
+        run = get_row(session, Run, run_id)  # the boundary: JSON bounded, a bad column named
         if row is None or run is None:
             return None
         goal_key = session.scalar(
             select(TopologicalState.key).where(TopologicalState.id == row.goal_state_id)
         )
-        checkpoint_row = session.get(SearchCheckpoint, run_id)
-        try:  # JSON and float64 arrays: data only, never code (docs/security.md); damage is refused
-            checkpoint = _checkpoint(checkpoint_row)
+        checkpoint_row = get_row(session, SearchCheckpoint, run_id)
+        checkpoint = _checkpoint(checkpoint_row)
+        try:  # float64 arrays: data only, never code (docs/security.md); damage is refused
             nodes = _nodes(session, run_id) if with_nodes else []
         except (ValueError, TypeError, UnicodeDecodeError) as exc:
             raise DamagedRunError(
                 f"planner run {run_id} is damaged in the database ({type(exc).__name__}: "
                 f"{str(exc)[:200]}): it cannot be resumed or replayed"
             ) from None
-        parameters = dict(run.parameters or {})
+        parameters = stored_object(run.parameters, "runs", run_id, "parameters")
         if row.goal_knot is not None:
-            members = [parse_p_data(p) for p in parameters.get("goal_states", [])]
+            members = _goal_states(parameters.get("goal_states"), run_id)
             members.sort(key=lambda p: p.key)
             goal = Goal(tuple(members), knot=row.goal_knot, crossings=row.goal_cross)
         else:
@@ -538,6 +530,18 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             pid=run.pid,
             last_write=checkpoint_row.updated_at if checkpoint_row is not None else None,
         )
+
+
+def _goal_states(value: Any, run_id: int) -> list[PData]:
+    """The members of a knot goal as stored (``runs.parameters.goal_states``): a list of P-data."""
+    field = "parameters.goal_states"
+    if not isinstance(value, list) or not value:
+        problem = f"must be a non-empty list of P-data, got {shown(value)}"
+        raise StoredValueError("runs", run_id, field, problem)
+    try:
+        return [parse_p_data(p) for p in value]
+    except ValueError as exc:
+        raise StoredValueError("runs", run_id, field, str(exc)[:200]) from None
 
 
 def mark_failed(store: Any, run_id: int | None, message: str) -> None:
