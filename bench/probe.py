@@ -473,15 +473,14 @@ def _newest_run(db: Path) -> int:
     return int(row[0] or 0)
 
 
-def _run_states(db: Path) -> str:
+def _run_states(db: Path) -> dict[int, str]:
+    """Each planner run's ``runs.status`` / ``search_runs.outcome``."""
     conn = sqlite3.connect(db)
     rows = conn.execute(
-        "select r.id || ':' || r.status || '/' || s.outcome "
-        "from runs r join search_runs s on s.run_id = r.id order by r.id"
-    )
-    states = " ".join(r[0] for r in rows)
+        "select r.id, r.status || '/' || s.outcome from runs r join search_runs s on s.run_id = r.id"
+    ).fetchall()
     conn.close()
-    return states
+    return dict(rows)
 
 
 def stored_run_value(plant: str, command: str) -> Callable[[Path, Path], str]:
@@ -498,9 +497,12 @@ def stored_run_value(plant: str, command: str) -> Callable[[Path, Path], str]:
         conn.close()
         before, states = digest(db), _run_states(db)
         out = cli(db, *command.format(**ids).split(), cwd=work, timeout=120)
-        after = _run_states(db)
-        moved = "" if after == states else f", runs {states} -> {after}"
-        return said(out, moved + _changed(db, before))
+        moved = [
+            f"run {i} {states.get(i, 'new')} -> {state}"
+            for i, state in _run_states(db).items()
+            if states.get(i) != state
+        ]
+        return said(out, "".join(f", {m}" for m in moved) + _changed(db, before))
 
     return trial
 
@@ -520,7 +522,7 @@ def ctrl_c_as_it_solves(db: Path, work: Path) -> str:
     time.sleep(0.3)
     child.send_signal(signal.SIGINT)
     _, err = child.communicate(timeout=120)
-    solved = _run_states(db).split()[-1].endswith("finished/solved")
+    solved = _run_states(db)[_newest_run(db)] == "finished/solved"
     return f"exit {child.returncode}, run stored solved: {bool(solved)}: {' '.join(err.split())[:150]}"
 
 

@@ -95,9 +95,21 @@ def _cp(run: int, column: str, value: Any) -> Plant:
 
 
 def _end_q(run: int, q: np.ndarray) -> Plant:
-    goal_node = "(select goal_node_id from search_runs where run_id = ?)"
-    statement = f"update search_nodes set q = ? where id = {goal_node}"
-    return lambda conn: conn.execute(statement, (q.tobytes(), run))
+    return _goal_node(run, "q", q.tobytes())
+
+
+GOAL_NODE = "(select goal_node_id from search_runs where run_id = ?)"
+
+
+def _goal_node(run: int, column: str, value: Any) -> Plant:
+    statement = f"update search_nodes set {column} = ? where id = {GOAL_NODE}"
+    return lambda conn: conn.execute(statement, (value, run))
+
+
+def _goal_state_key(run: int, key: str) -> Plant:
+    node_state = f"(select state_id from search_nodes where id = {GOAL_NODE})"
+    statement = f"update topological_states set key = ? where id = {node_state}"
+    return lambda conn: conn.execute(statement, (key, run))
 
 
 RESUME = ["plan", "--resume", str(STOPPED), "--workers", "1", "--max-iterations", "2"]
@@ -155,6 +167,11 @@ CASES = [
     _case("q all NaN", _end_q(SOLVED, np.full(93, np.nan)), UNTIE_IT, "q: must be finite floats, got 93"),
     _case("q all 1e300", _end_q(SOLVED, np.full(93, 1e300)), UNTIE_IT, "the simulator refuses it: rope left"),
     _case("q all zeros", _end_q(SOLVED, np.zeros(93)), UNTIE_IT, "q: the simulator refuses it"),
+    # the nodes of a run's plan (replay, render and untie read them)
+    _case("points of 5 floats", _goal_node(SOLVED, "points", bytes(40)), REPLAY, "points: must be float64"),
+    _case("curve link 99", _goal_node(SOLVED, "link", 99), REPLAY, "link: must be a link 0..20, got 99"),
+    _case("curve x_m text", _goal_node(SOLVED, "x_m", "far"), RENDER, "x_m: must be a finite number"),
+    _case("state key", _goal_state_key(SOLVED, "not p-data"), UNTIE_IT, "topological_states, row"),
     # item 10: untie --resume continues untie runs only
     _case(
         "untie --resume of a plan run",

@@ -30,6 +30,8 @@ from sqlalchemy import JSON, Text, select
 from sqlalchemy import cast as sql_cast
 from sqlalchemy.orm import Session
 
+from twisted.store.models import blob_to_array
+
 __all__ = [
     "MAX_JSON_BYTES",
     "MAX_JSON_DEPTH",
@@ -42,6 +44,8 @@ __all__ = [
     "get_row",
     "parse_json",
     "shown",
+    "stored_curve",
+    "stored_floats",
     "stored_object",
 ]
 
@@ -204,6 +208,29 @@ def check_checkpoint(
 
 def _finite(x: Any) -> bool:
     return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(x)
+
+
+def stored_floats(blob: Any, table: str, row: Any, field: str, width: int = 1) -> np.ndarray:
+    """A BLOB of little-endian float64 values (:func:`twisted.store.models.array_to_blob`) read back, in
+    rows of ``width`` when it is above 1: whole values, at least one."""
+    if not isinstance(blob, bytes) or not blob or len(blob) % (8 * width):
+        size = f"{len(blob):,} bytes" if isinstance(blob, bytes) else type(blob).__name__
+        rows = f" in rows of {width}" if width > 1 else ""
+        raise StoredValueError(table, row, field, f"must be float64 values{rows}, got {size}")
+    return blob_to_array(blob, (-1, width) if width > 1 else None)
+
+
+def stored_curve(
+    link: Any, z_max_m: Any, x_m: Any, y_m: Any, n_links: int, table: str, row: Any
+) -> tuple[int, float, float, float]:
+    """A stored curve's columns (``link``, ``z_max_m``, ``x_m``, ``y_m``): a link of the rope, finite
+    numbers."""
+    if isinstance(link, bool) or not isinstance(link, numbers.Integral) or not 0 <= int(link) < n_links:
+        raise StoredValueError(table, row, "link", f"must be a link 0..{n_links - 1}, got {shown(link)}")
+    for name, value in (("z_max_m", z_max_m), ("x_m", x_m), ("y_m", y_m)):
+        if not _finite(value):
+            raise StoredValueError(table, row, name, f"must be a finite number, got {shown(value)}")
+    return int(link), float(z_max_m), float(x_m), float(y_m)
 
 
 def check_configuration(q: np.ndarray, points: np.ndarray, n_points: int, table: str, row: Any) -> None:

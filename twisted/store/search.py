@@ -52,9 +52,18 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal, PlanInputError, state_goal
+from twisted.rope import N_LINKS
 from twisted.runtime import process_alive
-from twisted.store.boundary import StoredValueError, check_checkpoint, get_row, shown, stored_object
-from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
+from twisted.store.boundary import (
+    StoredValueError,
+    check_checkpoint,
+    get_row,
+    shown,
+    stored_curve,
+    stored_floats,
+    stored_object,
+)
+from twisted.store.models import Base, Run, TopologicalState, array_to_blob, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
 
@@ -471,15 +480,15 @@ def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[Stor
         seq_of[row.id] = row.seq
         curve = None
         if row.link is not None:  # the curve columns are NULL together (root) or set together
-            curve = (row.link, float(row.z_max_m or 0.0), float(row.x_m or 0.0), float(row.y_m or 0.0))
+            curve = stored_curve(row.link, row.z_max_m, row.x_m, row.y_m, N_LINKS, "search_nodes", row.id)
         out.append(
             StoredNode(
                 id=row.id,
                 seq=row.seq,
                 parent_seq=None if row.parent_id is None else seq_of.get(row.parent_id),
-                p_data=parse_p_data(key),
-                q=blob_to_array(row.q),
-                points=blob_to_array(row.points, (-1, 3)),
+                p_data=_state(key, row.state_id),
+                q=stored_floats(row.q, "search_nodes", row.id, "q"),
+                points=stored_floats(row.points, "search_nodes", row.id, "points", width=3),
                 curve=curve,
                 iteration=row.iteration,
                 sim_call=row.sim_call,
@@ -504,6 +513,8 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
         checkpoint = _checkpoint(checkpoint_row)
         try:  # float64 arrays: data only, never code (docs/security.md); damage is refused
             nodes = _nodes(session, run_id) if with_nodes else []
+        except StoredValueError:
+            raise
         except (ValueError, TypeError, UnicodeDecodeError) as exc:
             raise DamagedRunError(
                 f"planner run {run_id} is damaged in the database ({type(exc).__name__}: "
@@ -515,7 +526,7 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             members.sort(key=lambda p: p.key)
             goal = Goal(tuple(members), knot=row.goal_knot, crossings=row.goal_cross)
         else:
-            goal = state_goal(parse_p_data(goal_key or "[]"))
+            goal = state_goal(_state(goal_key or "[]", row.goal_state_id))
         return SearchRunInfo(
             run_id=run_id,
             goal=goal,
@@ -530,6 +541,14 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             pid=run.pid,
             last_write=checkpoint_row.updated_at if checkpoint_row is not None else None,
         )
+
+
+def _state(key: Any, state_id: int) -> PData:
+    """A node's state (``topological_states.key``) read back."""
+    try:
+        return parse_p_data(key)
+    except (ValueError, TypeError) as exc:
+        raise StoredValueError("topological_states", state_id, "key", str(exc)[:200]) from None
 
 
 def _goal_states(value: Any, run_id: int) -> list[PData]:
