@@ -158,11 +158,10 @@ def done_before_interrupt(what: str) -> None:
 def _refuse_stored_value(exc: BaseException) -> None:
     """A value read back from the store that its boundary refused (:mod:`twisted.store.boundary`): exit 2
     with "table, row, field: what is wrong", whichever command read it."""
-    if isinstance(exc, ValueError) and type(exc).__name__ == "StoredValueError":
-        from twisted.store.boundary import StoredValueError
+    from twisted.store.boundary import StoredValueError
 
-        if isinstance(exc, StoredValueError):
-            fail(str(exc))
+    if isinstance(exc, StoredValueError):
+        fail(str(exc))
 
 
 class Commands(typer.Typer):
