@@ -11,6 +11,9 @@ checks besides. Nothing outside ``--work`` (default: a temporary folder) is writ
 
 The trials of items 3, 5, 6, 8, 9 and 11 (the other half of the issue) come from
 ``bench/probe_store.py`` in the same form; items 12 and 13 need a Ray cluster and are tested there.
+Items ``62.5``, ``62.6``, ``62.10`` and ``62.11`` are issue 62's runs and checkpoints read back from the
+store (bad parameters, checkpoints and end configurations, ``untie --resume`` of a plan run, a Ctrl-C as
+a run solves): they add three small runs to the copy (random curves, no model) and plant into them.
 """
 
 from __future__ import annotations
