@@ -3,8 +3,16 @@ closures agree) or are knotoids, the (under, over) classes, the smallest count p
 identify() takes per state, and (with --db) how often the data visited them.
 
     python bench/bench_knots.py [--max-crossings 4] [--db sqlite:////tmp/copy.db]
+    python bench/bench_knots.py --setup [--plan] [--knots 6_1+ 3_1+#3_1+ ...]
 
 --db opens (and so migrates) the database: point it at a copy, not at data you must keep unchanged.
+
+--setup: the set-up of every knot goal of the table (issue 65, target 1 s each): in a fresh process
+per knot, the import of the goals and the KnotInfo table, then ``knot_goal(name)`` (the states cut from
+the knot's diagrams; nothing enumerated, nothing cached before). ``--plan`` also runs the first plan of
+each knot on a fresh database (``plan --knot K --max-iterations 1 --workers 1``) and prints its
+``setup_s`` (database created, model loaded, a simulator worker started, the goal made); a 7-crossing
+goal is refused there (the model encodes at most 6 crossings).
 """
 
 from __future__ import annotations
@@ -24,11 +32,67 @@ def _class(k: RopeKnot) -> str:
     return "knotoid " + "/".join(sorted((k.under.name, k.over.name)))
 
 
+_GOAL_SETUP = """
+import json, sys, time
+t0 = time.perf_counter()
+from twisted.goals import knot_goal
+t1 = time.perf_counter()
+goal = knot_goal(sys.argv[1])
+t2 = time.perf_counter()
+made = {"import_s": t1 - t0, "goal_s": t2 - t1, "states": len(goal.states), "crossings": goal.crossings}
+print(json.dumps(made))
+"""
+
+
+def goal_setup(plan: bool, only: list[str] | None = None) -> None:
+    """Set-up of every knot goal of the table, each in a fresh process (see the module docstring)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    header = f"{'knot':<10} {'crossings':>9} {'states':>6} {'import s':>9} {'goal s':>7}"
+    print(header + ("  first plan setup_s (fresh database)" if plan else ""))
+    worst = 0.0
+    for name in only or CATALOGUE:
+        if name == "0_1":
+            continue
+        command = [sys.executable, "-c", _GOAL_SETUP, name]
+        out = subprocess.run(command, env=env, cwd=root, capture_output=True, text=True, check=True)
+        made = json.loads(out.stdout)
+        worst = max(worst, made["goal_s"])
+        row = f"{name:<10} {made['crossings']:>9} {made['states']:>6} {made['import_s']:>9.3f}"
+        row += f" {made['goal_s']:>7.3f}"
+        if plan:
+            with tempfile.TemporaryDirectory() as tmp:
+                ran = subprocess.run(
+                    [sys.executable, "-m", "cli.main", "--db", f"sqlite:///{tmp}/fresh.db", "plan", "--knot",
+                     name, "--max-iterations", "1", "--workers", "1", "--seed", "0", "--json"],
+                    env=env, cwd=root, capture_output=True, text=True, check=False,
+                )  # fmt: skip
+            if ran.returncode == 2:
+                row += "  refused: " + " ".join((ran.stdout + ran.stderr).split())[-90:]
+            else:
+                row += f"  {json.loads(ran.stdout)['setup_s']:.2f}"
+        print(row, flush=True)
+    print(f"slowest goal: {worst:.3f} s (target 1 s)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--max-crossings", type=int, default=4, help="enumerate up to this count (5: ~1 min)")
     parser.add_argument("--db", help="database URL (a copy: opening migrates it)")
+    parser.add_argument("--setup", action="store_true", help="time every table knot goal's set-up instead")
+    parser.add_argument("--plan", action="store_true", help="with --setup: also a first plan on a fresh db")
+    parser.add_argument("--knots", nargs="+", help="with --setup: only these table knots (default: all)")
     args = parser.parse_args()
+    if args.setup:
+        goal_setup(args.plan, args.knots)
+        return
 
     t0 = time.perf_counter()
     states = enumerate_states(args.max_crossings)

@@ -595,15 +595,22 @@ TRIALS += RUN_TRIALS
 
 
 def _store_trials() -> list[Trial]:
-    """The trials of items 3, 5, 6, 8, 9 and 11 (``bench/probe_store.py``, the other half of the issue)."""
+    """The trials of issue 37's items 3, 5, 6, 8, 9 and 11 (``bench/probe_store.py``, the other half of
+    the issue) and of issue 62's items 1, 4, 7, 8 and 9 (``bench/probe_payloads.py``: run under a memory
+    limit, with each command's peak memory)."""
+    import importlib
+
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    trials = []
     try:
-        import probe_store  # type: ignore[import-not-found]
-    except ImportError:
-        return []
+        for name in ("probe_store", "probe_payloads"):
+            try:
+                trials += [Trial(*trial) for trial in importlib.import_module(name).TRIALS]
+            except ImportError:
+                continue
     finally:
         sys.path.pop(0)
-    return [Trial(*trial) for trial in probe_store.TRIALS]
+    return trials
 
 
 TRIALS += _store_trials()

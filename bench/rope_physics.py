@@ -11,7 +11,7 @@ grippier rope (or a thinner one, whose loops can close tighter) would make the s
 for more often, from the same configurations.
 
 For ``--pairs`` (node, next state) pairs per crossing count drawn from the stored runs' plan steps
-(``bench/step_moves.py``'s ``step_groups``: runs toward any goal, distinct adding steps), this takes
+(``lib.steps.step_groups``: runs toward any goal, distinct adding steps), this takes
 ``--k`` of the planner's curves (``StepCurves`` with today's options, the shipped model) from the node's
 configuration and simulates each on the default rope and on every ``--variant``: the hinge stiffness
 times ``stiffness``, the friction times ``friction`` (``RopeSim(friction_scale=...)``), the link radius
@@ -29,8 +29,7 @@ import argparse
 from typing import Any
 
 import numpy as np
-from r2_steps import planner_curves  # bench/ is this script's folder
-from step_moves import add_run_selection, pool_map, step_groups
+from lib.steps import add_run_selection, planner_curves, pool_map, step_groups
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves

@@ -21,8 +21,8 @@ import statistics
 from collections import defaultdict
 from typing import Any
 
+from lib.steps import add_run_selection
 from sqlalchemy import select
-from step_moves import add_run_selection  # bench/ is this script's folder
 
 from twisted.experiments.report import load_results
 from twisted.store import open_store

@@ -28,7 +28,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from step_moves import move_class, stored_pairs  # bench/ is this script's folder
+from lib.steps import move_class, stored_pairs
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves

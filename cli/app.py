@@ -507,3 +507,14 @@ def visible(text: str) -> str:
     colour or move the cursor). Newlines stay: messages may have several lines.
     """
     return "".join(ch if ch == "\n" or ch.isprintable() else ascii(ch)[1:-1] for ch in text)
+
+
+def shown_name(text: object) -> str:
+    """A name read back from the store (a set, model, label, tag), ready for the console.
+
+    The store is input like any other (docs/security.md): a name written there by hand may hold terminal
+    escapes (clear the screen, set the clipboard). Every one the CLI prints goes through here: control
+    and invisible characters (newlines too) become ``\\x1b``-style escapes and brackets are never read
+    as rich markup.
+    """
+    return escape(visible(str(text)).replace("\n", "\\n"))

@@ -27,7 +27,7 @@ def browse_command(
     missing = [name for name in ("datasette", "uvicorn") if importlib.util.find_spec(name) is None]
     if missing:
         fail(f"twisted browse needs Datasette ({', '.join(missing)} is not installed): {BROWSE_EXTRA}")
-    from twisted.browse.server import DATABASE, HOST, listen, serve
+    from twisted.browse.server import HOST, listen, serve
     from twisted.store import StoreError
     from twisted.store.db import parse_url, sqlite_path
 
@@ -50,7 +50,7 @@ def browse_command(
         store.close()
         path = sqlite_path(store.url)
         assert path is not None  # open_db refuses an in-memory database
-        typer.echo(f"Serving {path} read-only at http://{HOST}:{port}/{DATABASE} (Datasette); Ctrl-C stops.")
+        typer.echo(f"Serving {path} read-only at http://{HOST}:{port}/ (Datasette); Ctrl-C stops.")
         serve(path, url, sock)
     except KeyboardInterrupt:
         signum = received[-1] if received else 2

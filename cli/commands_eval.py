@@ -18,6 +18,7 @@ from cli.app import (
     err_console,
     fail,
     open_db,
+    shown_name,
 )
 from cli.options import (
     DEFAULT_SEEDS,
@@ -254,9 +255,8 @@ def compare_command(
         print_json([c.to_dict() for c in comparisons])
         return
     for c in comparisons:
-        table = Table(
-            "", label_a, label_b, f"{label_a} / {label_b}", title=f"{c.scope}: {label_a} against {label_b}"
-        )
+        a, b = shown_name(label_a), shown_name(label_b)
+        table = Table("", a, b, f"{a} / {b}", title=f"{shown_name(c.scope)}: {a} against {b}")
         table.add_row("runs (paired by goal and seed)", str(c.a.runs), str(c.b.runs), "")
         table.add_row("solved", str(c.a.solved), str(c.b.solved), "")
         table.add_row(

@@ -50,9 +50,13 @@ def improve_command(
         None, "--init-model", help="Generation 0's model (default: the shipped model, stored as 'shipped')."
     ),
     goalsets: Annotated[
-        Path,
-        typer.Option("--goalsets", help="Goal-set files; final-, eval-, tune-*.json are evaluation goals."),
-    ] = Path("goalsets"),
+        Path | None,
+        typer.Option(
+            "--goalsets",
+            help="Goal-set files; final-, eval-, tune-*.json are evaluation goals (default: the project's "
+            "goalsets/, wherever the command runs).",
+        ),
+    ] = None,
     parallel: int = typer.Option(
         1, "--parallel", help="Searches at once, each its own process on one core (training and tuning)."
     ),
@@ -83,7 +87,7 @@ def improve_command(
         epochs=epochs,
         batch_size=batch_size,
         init_model_id=init_model,
-        goalsets_dir=str(goalsets),
+        goalsets_dir=None if goalsets is None else str(goalsets),
         parallel=parallel,
         device=device,
     )

@@ -17,22 +17,6 @@ knots_app = subcommands(
     "agree; otherwise it is a knotoid).",
 )
 
-# The names shown by `knots list`, one per catalogue entry (resolve_knot accepts more spellings).
-LIST_NAMES = (
-    ("unknot", "0_1"),
-    ("overhand+", "3_1+"),
-    ("overhand-", "3_1-"),
-    ("figure-eight", "4_1"),
-    ("5_1+", "5_1+"),
-    ("5_1-", "5_1-"),
-    ("5_2+", "5_2+"),
-    ("5_2-", "5_2-"),
-    ("granny+", "3_1+#3_1+"),
-    ("granny-", "3_1-#3_1-"),
-    ("square", "3_1+#3_1-"),
-)
-
-
 def _visits(ctx: typer.Context, keys: list[str]) -> dict[str, int] | None:
     """Configurations per state key from the database, or None when there is no database to read."""
     from twisted.store import StoreError, open_store
@@ -47,6 +31,22 @@ def _visits(ctx: typer.Context, keys: list[str]) -> dict[str, int] | None:
         return configurations_per_state(session, keys)
 
 
+def list_name(knot_type: str) -> str:
+    """The name ``knots list`` shows: the common name with its chirality where one stands for exactly this
+    type (``overhand+``, ``figure-eight``, ``square``), else the table type (``6_2+``)."""
+    from twisted.knots import COMMON_NAMES, KNOT_NAMES, knotinfo_name
+
+    for name in ("granny+", "granny-", "square"):
+        if KNOT_NAMES[name] == {knot_type}:
+            return name
+    bare = knotinfo_name(knot_type)
+    if knot_type == "0_1":
+        return "unknot"
+    if "#" in knot_type or bare not in COMMON_NAMES:
+        return knot_type
+    return COMMON_NAMES[bare][0] + knot_type[len(bare) :]
+
+
 @knots_app.command("list")
 def list_command(
     ctx: typer.Context,
@@ -54,61 +54,64 @@ def list_command(
         None,
         "--crossings",
         help="List the states of this many crossings (default: each knot's crossing number, the least "
-        "count at which a rope ties it).",
+        "count at which a rope ties it; there the states are cut from the knot's KnotInfo diagram).",
     ),
     max_crossings: int = typer.Option(
         4,
         "--max-crossings",
-        help="Enumerate states up to this many crossings (5 takes ~1 min); granny and square are built "
-        "at 6 from their summands without enumerating.",
+        help="Above a knot's crossing number its states are enumerated, up to this many crossings (5 takes "
+        "~1 min).",
     ),
     limit: int = typer.Option(10, "--limit", help="States shown per knot, most visited first (0: all)."),
     as_json: bool = json_option("everything (all states)"),
 ) -> None:
-    """For each named knot: its invariants, and the P-data states that really tie it (both closures are the
-    knot) at its crossing number, with how often the data in --db visited each (configurations reached
-    in that state)."""
-    from rich.progress import Progress
+    """The knot table (KnotInfo's prime knots up to 7 crossings, each chirality, and the sums of two with at
+    most 7 crossings in all): for each knot its invariants, and the P-data states that really tie it (both
+    closures are the knot) at its crossing number, with how often the data in --db visited each
+    (configurations reached in that state)."""
+    from twisted.knots import (
+        CATALOGUE,
+        COMPOSITE_NOTE,
+        MAX_BUILT_CROSSINGS,
+        MAX_ENUMERATED_CROSSINGS,
+        crossing_number,
+        knotinfo_name,
+        states_tying,
+    )
 
-    from twisted.knots import CATALOGUE, COMPOSITE_NOTE, MAX_BUILT_CROSSINGS, crossing_number, states_tying
-
-    # 5 crossings enumerate 130,304 states (~1 min); 6 would take many minutes and gigabytes
     if crossings is not None and not 0 <= crossings <= MAX_BUILT_CROSSINGS:
         fail(f"--crossings must be between 0 and {MAX_BUILT_CROSSINGS}, got {crossings}")
-    if not 0 <= max_crossings <= 5:
-        fail(f"--max-crossings must be between 0 and 5, got {max_crossings}")
+    if not 0 <= max_crossings <= MAX_ENUMERATED_CROSSINGS:
+        fail(f"--max-crossings must be between 0 and {MAX_ENUMERATED_CROSSINGS}, got {max_crossings}")
     if limit < 0:
         fail(f"--limit must be >= 0, got {limit}")
 
     found: dict[str, list[Any] | None] = {}  # None: not enumerated at that count (see --max-crossings)
     counts: dict[str, int] = {}
-    with Progress(console=err_console, transient=True) as progress:
-        task = progress.add_task("enumerating states", total=len(LIST_NAMES))
-        for _name, canonical in LIST_NAMES:
-            count = crossings if crossings is not None else crossing_number(canonical)
-            counts[canonical] = count
-            try:
-                found[canonical] = states_tying(canonical, count, max_crossings=max_crossings)
-            except ValueError:
-                found[canonical] = None
-            progress.advance(task)
+    for knot_type in CATALOGUE:
+        count = crossings if crossings is not None else crossing_number(knot_type)
+        counts[knot_type] = count
+        try:
+            found[knot_type] = states_tying(knot_type, count, max_crossings=max_crossings)
+        except ValueError:
+            found[knot_type] = None
     visits = _visits(ctx, [p.key for states in found.values() for p in states or ()])
 
     entries: list[dict[str, Any]] = []
-    for name, canonical in LIST_NAMES:
-        k = CATALOGUE[canonical]
-        listed = found[canonical]
+    for knot_type, k in CATALOGUE.items():
+        listed = found[knot_type]
         states = sorted(listed or [], key=lambda p: (-(visits or {}).get(p.key, 0), p.key))
         entries.append(
             {
-                "name": name,
-                "knot_type": canonical,
+                "name": list_name(knot_type),
+                "knot_type": knot_type,
+                "knotinfo": knotinfo_name(knot_type),
                 "alexander": k.alexander_text(),
                 "determinant": k.determinant,
                 "jones": k.jones_text(),
-                "crossing_number": crossing_number(canonical),
-                "crossings": counts[canonical],
-                "enumerated": listed is not None,
+                "crossing_number": crossing_number(knot_type),
+                "crossings": counts[knot_type],
+                "listed": listed is not None,
                 "states": [
                     {"p_data": p.to_list(), "configurations": None if visits is None else visits[p.key]}
                     for p in states
@@ -122,8 +125,9 @@ def list_command(
         return
 
     summary = Table(
-        title="Named knots: states whose closures under AND over the table are the knot (knotoids excluded)",
-        caption=f"Note: {COMPOSITE_NOTE} (docs/goals.md).",
+        title="The knot table (KnotInfo): states whose closures under AND over the table are the knot "
+        "(knotoids excluded)",
+        caption=f"Note: {COMPOSITE_NOTE} (docs/knots.md).",
     )
     for column in ("name", "type", "Alexander", "det", "Jones", "crossings", "states", "visited", "configs"):
         summary.add_column(column, justify="right" if column in ("det", "crossings", "states") else "left")
@@ -135,7 +139,7 @@ def list_command(
             str(e["determinant"]),
             e["jones"],
             str(e["crossings"]),
-            str(len(e["states"])) if e["enumerated"] else f"? (--max-crossings {e['crossings']})",
+            str(len(e["states"])) if e["listed"] else f"? (--max-crossings {e['crossings']})",
             "-" if e["visited_states"] is None else str(e["visited_states"]),
             "-" if e["configurations"] is None else str(e["configurations"]),
         )

@@ -346,7 +346,7 @@ def _set_up(
     goal_p = None
     kept_crossings = None
     if request.goal is not None or request.knot is not None or request.crossings is not None:
-        step("enumerating the knot's states" if request.knot is not None else "checking the goal")
+        step("making the knot's states" if request.knot is not None else "checking the goal")
         try:
             other_start = request.from_run is not None or request.start_config is not None
             kept_crossings = _load_knot_states(ctx, request)

@@ -13,6 +13,7 @@ from cli.app import (
     fail,
     open_db,
     seed_option,
+    shown_name,
     subcommands,
 )
 from cli.options import (
@@ -30,11 +31,11 @@ def _print_sets(records: list[Any]) -> None:
         tags = sorted({p.tag for p in r.problems})
         crosses = sorted({p.p_data.cross for p in r.problems})
         table.add_row(
-            r.name,
+            shown_name(r.name),
             str(len(r.problems)),
             ",".join(map(str, crosses)),
             f"{min(freqs)}-{max(freqs)}" if freqs else "-",
-            ", ".join(tags),
+            ", ".join(map(shown_name, tags)),
         )
     console.print(table)
 
@@ -155,8 +156,8 @@ def problems_list(
     for s in sets:
         table.add_row(
             str(s["id"]),
-            s["name"],
-            s["source"],
+            shown_name(s["name"]),
+            shown_name(s["source"]),
             "-" if s["seed"] is None else str(s["seed"]),
             str(s["problems"]),
             "-".join(map(str, sorted(set(s["cross"])))) if s["cross"][0] is not None else "-",
@@ -167,5 +168,7 @@ def problems_list(
     if record is not None:
         goals = Table("#", "goal", "cross", "frequency", "tag")
         for p in record.problems:
-            goals.add_row(str(p.idx), p.goal_key, str(p.p_data.cross), str(p.frequency), p.tag)
+            goals.add_row(
+                str(p.idx), shown_name(p.goal_key), str(p.p_data.cross), str(p.frequency), shown_name(p.tag)
+            )
         console.print(goals)

@@ -11,7 +11,7 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option, unwritable
+from cli.app import EXIT_BAD_INPUT, app, console, fail, open_db, seed_option, shown_name, unwritable
 from cli.options import (
     DEFAULT_LINK_HEAD,
     DEFAULT_SOURCES,
@@ -359,7 +359,7 @@ def models_command(
     for m in models:
         table.add_row(
             str(m.id),
-            m.name,
+            shown_name(m.name),
             ("-" if m.training_run_id is None else str(m.training_run_id))
             + ("" if m.metrics.get("init_model_id") is None else f" (from {m.metrics['init_model_id']})"),
             generations.get(m.id, "-"),
@@ -376,12 +376,14 @@ def models_command(
 def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: int | None) -> None:
     """Check that ``path`` holds a loadable model, then store it (before that, nothing is opened)."""
     from twisted.model.registry import ModelError, load_model_file, save_model
+    from twisted.runtime import name_problem
 
     if model_id is not None:
         fail("--id chooses a model to export: it cannot go with --import")
     label = name if name is not None else path.stem
-    if not 1 <= len(label) <= 64:
-        fail(f"--name must have 1 to 64 characters, got {label!r}")
+    problem = name_problem(label)  # a name from the file name is checked as --name is
+    if problem is not None:
+        fail(f"--import {path}: the model name {label!r} (from the file name) {problem}: give --name")
     try:
         model = load_model_file(path)
     except ModelError as exc:
@@ -391,7 +393,8 @@ def _import_model(ctx: typer.Context, path: Path, name: str | None, model_id: in
         fail(f"--import {path}: this model cannot plan: {broken}")
     store = open_db(ctx)
     new_id = save_model(store, model, name=label)
+    samples = model.metadata.get("data_size", "?")
     console.print(
-        f"model {new_id} ({label}, trained on {model.metadata.get('data_size', '?')} samples) stored from "
-        f"{path}; it is the newest, so `twisted plan` and `twisted eval` use it unless given --model"
+        f"model {new_id} ({shown_name(label)}, trained on {samples} samples) stored from {shown_name(path)}; "
+        "it is the newest, so `twisted plan` and `twisted eval` use it unless given --model"
     )

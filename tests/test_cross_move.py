@@ -16,7 +16,7 @@ from twisted.goals import PlanInputError
 from twisted.moves import Move, successors
 from twisted.planner import PlannerOptions, planner_options
 from twisted.planner.options import N_LINKS as PLANNER_N_LINKS
-from twisted.proposals import across_curve, cross_fit, cross_move_curve, cross_reach, segment_bounds
+from twisted.proposals import across_curve, cross_fit, cross_move_curve, segment_bounds
 from twisted.sim import N_LINKS, RopeSim, sample_curve
 from twisted.topology import PData, top
 
@@ -122,29 +122,6 @@ def test_the_sign_fit_of_a_cross_move_and_of_its_other_sign_share_the_segment() 
         assert twins >= 4
         unfit = next(m for m in moves if cross_fit(points, m) == 0.0)
         assert isinstance(cross_move_curve(np.random.default_rng(0), points, unfit).link, int)
-
-
-def test_the_reach_of_a_cross_move_is_the_tips_distance_in_free_pieces() -> None:
-    """``cross_reach``: infinite where no point fits; otherwise the table distance from the tip to the
-    nearest fitting point of the crossed segment (no nearer than the segment's nearest point), over the
-    rope length of the end's free piece: the same rope drawn twice as large on the table reaches twice
-    as far (its crossings, and so its pieces, are the same)."""
-    from twisted.rope import LINK_SPACING_M
-
-    _, points = _rope(2)
-    bounds = segment_bounds(points)
-    for move in [move for _, move in _cross_moves(top(points))]:
-        reach = cross_reach(points, move)
-        assert (reach == float("inf")) == (cross_fit(points, move) == 0.0)
-        if reach == float("inf"):
-            continue
-        tip = points[0] if move.segment == 0 else points[-1]
-        free = (bounds[1] if move.segment == 0 else len(points) - 1 - bounds[-2]) * LINK_SPACING_M
-        lo, hi = bounds[move.other_segment], bounds[move.other_segment + 1]
-        nearest = min(float(np.hypot(*(_at(points, s)[:2] - tip[:2]))) for s in np.linspace(lo, hi, 200))
-        assert nearest / free <= reach + 1e-9  # the fitting points are some of the segment's points
-        larger = points * np.array([2.0, 2.0, 1.0])
-        assert cross_reach(larger, move) == pytest.approx(2.0 * reach)
 
 
 def test_cross_move_curves_make_their_move_in_the_simulator_more_often_than_random_curves() -> None:

@@ -116,9 +116,10 @@ def test_specs_round_trip_and_name_the_bad_part() -> None:
         goal_from_spec("bowline")
     with pytest.raises(GoalError, match="a knotoid is not a knot"):
         goal_from_spec("knotoid")
-    with pytest.raises(GoalError, match="crossings must be 1 to 6"):
-        knot_goal("overhand", 7)
-    # prime knots are enumerated, and never beyond 5 crossings (6 would be millions of states)
+    with pytest.raises(GoalError, match="crossings must be 1 to 7"):
+        knot_goal("overhand", 8)
+    # above its crossing number a knot's states are enumerated, never beyond 5 crossings (6 would be
+    # millions of states)
     with pytest.raises(GoalError, match="would have to be enumerated"):
         knot_goal("overhand", 6)
     with pytest.raises(GoalError, match="straight rope"):
@@ -233,7 +234,7 @@ def test_knot_runs_resume_by_knot_and_refuse_another_goal(db_url: str) -> None:
         (["--knot", "knotoid"], "a knotoid is not a knot"),
         (["--knot", "overhand", "--goal", ONE_CROSSING], "exactly one goal"),
         (["--goal", ONE_CROSSING, "--crossings", "3"], "--crossings goes with --knot"),
-        (["--knot", "overhand", "--crossings", "9"], "crossings must be 1 to 6"),
+        (["--knot", "overhand", "--crossings", "9"], "crossings must be 1 to 7"),
         (["--knot", "figure-eight", "--crossings", "1"], "no rope state"),
         (
             ["--knot", "overhand", "--crossings", "2"],

@@ -30,6 +30,11 @@ def _write_set(tmp_path: Path, name: str, goals: list[object]) -> Path:
     return path
 
 
+def _empty_folder(path: Path) -> Path:
+    path.mkdir(exist_ok=True)
+    return path
+
+
 def _one_crossing_goals() -> list[object]:
     return [p.to_list() for p in enumerate_states(1)[1]]
 
@@ -41,6 +46,7 @@ def test_improve_refuses_an_evaluation_set_as_training_goals(sqlite_url: str, tm
         code, out = _cli(sqlite_url, "problems", "import", str(path))
         assert code == 0, out
     empty = tmp_path / "no-files"
+    empty.mkdir()
     # a stored set named as an evaluation set, and the tuning set itself
     for train_set in ("final-x", "tune-x"):
         code, out = _cli(
@@ -71,6 +77,49 @@ def test_goal_files_named_final_are_evaluation_goals(sqlite_url: str, tmp_path: 
         keys, names = evaluation_goal_keys(session, "tune-y", folder)
     expected = {json.dumps(g, separators=(",", ":")) for g in (goals[0], goals[1], goals[3])}
     assert keys == expected and names == ["tune-y"]
+
+
+def test_the_guard_reads_the_committed_sets_from_any_folder_and_refuses_bad_ones(
+    sqlite_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 62, item 4. Before: run from a folder without goalsets/, `improve --train-set mine` (goal 0
+    of goalsets/final-u4.json) went on to train; --goalsets /nonexistent was accepted; a final-*.json that
+    is not UTF-8, or a folder so named, gave a traceback."""
+    from twisted.experiments.problems import parse_goal_file
+
+    final = parse_goal_file((Path(__file__).resolve().parents[1] / "goalsets" / "final-u4.json").read_text())
+    mine = _write_set(tmp_path, "mine", [next(iter(final.values()))[0].spec])
+    tune = _write_set(tmp_path, "tune-z", _one_crossing_goals()[:1])
+    for path in (mine, tune):
+        assert _cli(sqlite_url, "problems", "import", str(path))[0] == 0
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # no goalsets/ here
+    base = ["improve", "--tune-set", "tune-z", "--train-set", "mine"]
+
+    def wide(db: str, *args: str) -> tuple[int, str]:  # wide: the long paths stay on one line
+        result = runner.invoke(app, ["--db", db, *args], env={"COLUMNS": "400"})
+        return result.exit_code, result.output
+
+    code, out = wide(sqlite_url, *base)
+    assert code == 2 and "goal 0" in out and "evaluation set or file" in out, out
+
+    code, out = wide(sqlite_url, *base, "--goalsets", str(tmp_path / "nonexistent"))
+    assert code == 2 and "does not exist" in out, out
+    bad = _empty_folder(tmp_path / "bad")
+    (bad / "final-bad.json").write_bytes(b"\xff\xfe{")
+    code, out = wide(sqlite_url, *base, "--goalsets", str(bad))
+    assert code == 2 and "final-bad.json" in out and "UTF-16" in out, out
+    (bad / "final-bad.json").unlink()
+    (bad / "final-x.json").mkdir()
+    code, out = wide(sqlite_url, *base, "--goalsets", str(bad))
+    assert code == 2 and "final-x.json" in out and "not a file" in out, out
+    (bad / "final-x.json").rmdir()
+    (bad / "eval-y.json").write_text('[[[1,"O",9,"+"]]]')
+    code, out = wide(sqlite_url, *base, "--goalsets", str(bad))
+    assert code == 2 and "eval-y.json" in out, out
+    with open_store(sqlite_url) as store, store.session() as session:
+        assert session.scalars(select(ImproveGeneration)).all() == []
 
 
 def test_drawn_training_goals_never_hold_an_evaluation_goal() -> None:
@@ -119,7 +168,7 @@ def _one_generation(
         tune_timeout_s=30.0,
         epochs=1,
         batch_size=16,
-        goalsets_dir=str(tmp_path / "none"),
+        goalsets_dir=str(_empty_folder(tmp_path / "none")),
         **options,
     )
 

@@ -290,12 +290,15 @@ def test_stats_and_knots_list_show_visits_per_knot(sqlite_url: str) -> None:
     assert entries["4_1"]["crossings"] == 4 and len(entries["4_1"]["states"]) == 8
     assert entries["4_1"]["visited_states"] == 0
     assert all(identify(parse_p_data(s["p_data"])).name == "4_1" for s in entries["4_1"]["states"])
-    # composites are built at 6 crossings; 5_1 / 5_2 need --max-crossings 5 (not run here: a minute)
+    # every table knot at its crossing number: cut from its diagram, composites joined from their summands
     assert entries["3_1+#3_1+"]["crossings"] == 6 and len(entries["3_1+#3_1+"]["states"]) == 24
     assert entries["3_1+#3_1-"]["name"] == "square" and len(entries["3_1+#3_1-"]["states"]) == 48
     assert entries["3_1+#3_1-"]["determinant"] == 9
-    assert entries["5_1+"]["crossings"] == 5 and entries["5_1+"]["enumerated"] is False
-    assert entries["5_1+"]["states"] == []
+    assert entries["5_1+"]["crossings"] == 5 and entries["5_1+"]["listed"] is True
+    assert len(entries["5_1+"]["states"]) == 2 and entries["7_7-"]["knotinfo"] == "7_7"
+    assert entries["7_7-"]["crossings"] == 7 and len(entries["7_7-"]["states"]) == 28
+    # above the crossing number the states are enumerated, up to --max-crossings
+    assert entries["4_1"]["listed"] and len(entries) == 32
     listed_keys = {
         json.dumps(s["p_data"], separators=(",", ":")) for e in entries.values() for s in e["states"]
     }

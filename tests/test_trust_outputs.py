@@ -281,3 +281,36 @@ def test_an_error_quoting_a_terminal_escape_shows_it_escaped(tmp_path: Path) -> 
     assert result.exit_code == 2
     assert "\x1b" not in said(result)
     assert "\\x1b[31mred" in said(result)
+
+
+def test_names_from_file_names_are_checked_and_names_from_the_store_print_escaped(
+    store_with_model: Path, tmp_path: Path
+) -> None:
+    """Issue 62, item 7: `models --import` takes the file's name only when --name would accept it, and
+    every name read back from the store (planted there by hand) prints with its escapes visible."""
+    import sqlite3
+
+    evil = tmp_path / "\x1b[41mEVIL\x1b[0m.pt"
+    evil.write_bytes(default_model_path().read_bytes())
+    fresh = tmp_path / "fresh.db"
+    result = runner.invoke(app, ["--db", f"sqlite:///{fresh}", "models", "--import", str(evil)])
+    assert result.exit_code == 2 and "give --name" in said(result), said(result)
+    assert "\x1b" not in result.output and not fresh.exists()
+
+    db = f"sqlite:///{store_with_model}"
+    goals = tmp_path / "one.json"
+    goals.write_text(json.dumps([json.loads(ONE)]))
+    imported = runner.invoke(app, ["--db", db, "problems", "import", str(goals), "--name", "plain"])
+    assert imported.exit_code == 0, imported.output
+    hostile = "x\x1b[2J\x1b]52;c;ZXZpbA==\x07[red]y\nz\u200b"
+    conn = sqlite3.connect(store_with_model)
+    conn.execute("update problem_sets set name = ?", (hostile,))
+    conn.execute("update problems set tag = ?", (hostile,))
+    conn.execute("update models set name = ?", (hostile,))
+    conn.commit()
+    conn.close()
+    for args in (["models"], ["problems", "list"], ["problems", "list", "--show", hostile]):
+        result = runner.invoke(app, ["--db", db, *args], env={"COLUMNS": "300"})
+        assert result.exit_code == 0, result.output
+        assert not {"\x1b", "\x07", "\u200b"} & set(result.output), (args, result.output)
+        assert "x\\x1b[2J\\x1b]52;c;ZXZpbA==\\x07[red]y\\nz\\u200b" in result.output, (args, result.output)

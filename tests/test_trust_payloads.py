@@ -369,3 +369,85 @@ def test_a_plan_run_that_dies_is_marked_failed_with_the_reason(db: Path) -> None
     status, message = conn.execute("select status, message from runs where id = ?", (run_id,)).fetchone()
     conn.close()
     assert status == "failed" and message.startswith("ValueError"), (status, message)
+
+
+# ---- issue 62: payloads bounded by what they declare, before anything is unpacked -------------------------
+
+
+def deflated(payload: bytes) -> bytes:
+    """``payload`` (a torch zip) with every member deflated: what torch.save never writes."""
+    import zipfile
+
+    src = zipfile.ZipFile(io.BytesIO(payload))
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as archive:
+        for info in src.infolist():
+            archive.writestr(info.filename, src.read(info.filename))
+    return out.getvalue()
+
+
+def _torch_bytes(obj: Any) -> bytes:
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return buf.getvalue()
+
+
+def test_load_tensors_refuses_compressed_members_and_views_beyond_their_storage() -> None:
+    """Item 1 / 9: a few kilobytes that inflate to megabytes, or one byte seen as 10^8, are refused from
+    the zip directory / the storage size, before anything is unpacked or iterated."""
+    bomb = deflated(_torch_bytes({"w": torch.zeros(5_000_000, dtype=torch.uint8)}))
+    assert len(bomb) < 10_000
+    with pytest.raises(UnsafePayloadError, match="is compressed .* unpack"):
+        load_tensors(bomb, "payload 3")
+    view = _torch_bytes({"w": torch.zeros(1, dtype=torch.uint8).expand(100_000_000)})
+    with pytest.raises(UnsafePayloadError, match="claims 100,000,000 bytes over a storage of 1"):
+        load_tensors(view, "payload 4")
+    plain = _torch_bytes({"w": torch.arange(4.0)})
+    with pytest.raises(UnsafePayloadError, match="more than the 10"):
+        load_tensors(plain, "payload 5", max_bytes=10)
+    assert torch.equal(load_tensors(plain, "payload 5", max_bytes=len(plain))["w"], torch.arange(4.0))
+
+
+def test_sac_replay_buffer_of_the_wrong_shape_is_refused_without_touching_its_elements(
+    sac_run: Any, db: Path, tmp_path: Path
+) -> None:
+    """Item 1: a tensor where the run's buffer has a dict of arrays (and a deflated one), exit 2 at once,
+    and the message is not built from the stored elements."""
+    from twisted.rl.sac import BUFFER_FORMAT, _policy_bytes
+
+    config, run_id, store_checkpoint = sac_run
+    policy = _policy_bytes(_model(config))
+    marker = tmp_path / "ran"
+    for observations in (torch.zeros(20_000, dtype=torch.uint8), [0] * 20_000, "x" * 20_000):
+        state = {"format": BUFFER_FORMAT, "pos": 0, "full": False, "arrays": {"observations": observations}}
+        store_checkpoint(policy, zlib.compress(_torch_bytes(state)))
+        out = refused(["rl", "train", "--resume", str(run_id), "--threads", "1"], db, marker)
+        assert "observations is a" in out and len(out) < 600, out
+    state = {"format": BUFFER_FORMAT, "arrays": {"observations": torch.zeros(5_000_000, dtype=torch.uint8)}}
+    store_checkpoint(policy, zlib.compress(deflated(_torch_bytes(state))))
+    out = refused(["rl", "train", "--resume", str(run_id), "--threads", "1"], db, marker)
+    assert "is compressed" in out
+
+
+def test_model_weights_are_bounded_by_their_row_and_their_config(db: Path, tmp_path: Path) -> None:
+    """Item 9: deflated weights (even of a good model) are refused by `models --import` and `plan` before
+    anything is unpacked; a config that declares another network is refused before that one is built."""
+    from twisted.model.registry import default_model_path
+
+    good = default_model_path().read_bytes()
+    packed = tmp_path / "packed.pt"
+    packed.write_bytes(deflated(good))
+    assert len(packed.read_bytes()) < len(good)
+    marker = tmp_path / "ran"
+    out = refused(["models", "--import", str(packed)], db, marker)
+    assert "is compressed" in out
+    _plant_model(db, packed.read_bytes())
+    out = refused(["plan", "--goal", ONE, "--workers", "1", "--timeout", "5"], db, marker)
+    assert "is compressed" in out
+
+    blob = load_tensors(good, "good")
+    blob["config"]["hidden"] *= 8  # an architecture 64 times the weights it comes with
+    wide = tmp_path / "wide.pt"
+    wide.write_bytes(_torch_bytes(blob))
+    out = refused(["models", "--import", str(wide)], db, marker)
+    assert "do not fit the architecture its config declares" in out

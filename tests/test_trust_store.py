@@ -168,6 +168,31 @@ def test_a_writing_command_still_refuses_a_read_only_store(store_copy: Path, tmp
     assert code == 2 and "not writable" in output, output
 
 
+def test_a_read_only_url_is_honoured_or_refused(
+    store_copy: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 62, item 8. Before: `TWISTED_DB='sqlite:///../p.db?mode=ro' problems import` printed an
+    SQLAlchemy warning (the driver drops the option), exit 0, and the set was written."""
+    goals = tmp_path / "g.json"
+    goals.write_text(json.dumps([json.loads(ONE_CROSSING)]))
+    before = _digest(store_copy)
+    monkeypatch.chdir(store_copy.parent)  # a relative path, as in the report
+    env = {"TWISTED_DB": "sqlite:///../copy/twisted.db?mode=ro"}
+    code, output = _cli("problems", "import", str(goals), "--name", "zz2", env=env)
+    assert code == 2 and "read-only (mode=ro)" in output and "nothing was written" in output, output
+    assert _digest(store_copy) == before
+    code, output = _cli("problems", "list", "--json", env=env)  # a reading command reads it
+    assert code == 0 and "zz2" not in output, output
+    for url, said in (
+        ("sqlite:///../copy/twisted.db?mode=rw", "mode=rw is not understood"),
+        ("sqlite:///../copy/twisted.db?mode=ro&cache=shared", "option cache is not understood"),
+        ("sqlite:///../copy/new.db?mode=ro", "does not exist"),
+    ):
+        code, output = _cli("--db", url, "problems", "list")
+        assert code == 2 and said in output, (url, output)
+    assert _digest(store_copy) == before and not (store_copy.parent / "new.db").exists()
+
+
 def test_a_reading_command_on_a_new_database_still_creates_it(tmp_path: Path) -> None:
     """Read-only opening applies to an existing store; `twisted models` on a new --db makes it as before."""
     code, out = _cli("--db", f"sqlite:///{tmp_path / 'new.db'}", "models", "--json")

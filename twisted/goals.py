@@ -2,8 +2,9 @@
 
 A goal is a set of topological states; a search succeeds when it reaches any member. ``--goal`` gives a
 set of one; ``--knot overhand [--crossings N]`` gives the states of N crossings (default: the knot's
-crossing number) that really tie that knot: both closures, under and over the table, are it
-(:func:`twisted.knots.states_tying`; knotoids are never goals).
+crossing number, where they are made from its KnotInfo diagram) that really tie that knot: both
+closures, under and over the table, are it (:func:`twisted.knots.states_tying`; knotoids are never
+goals).
 
 Goals are written as one line of text, the *goal spec*, wherever a goal must be stored or passed on:
 the P-data key for a state (``[[1,"O",2,"+"],[2,"U",1,"+"]]``) or ``knot:<name>@<crossings>`` for a knot
@@ -40,8 +41,8 @@ __all__ = [
 ]
 
 KNOT_PREFIX = "knot:"
-# Knots are searched among enumerated states; 5 crossings already takes ~25 s to enumerate, and the
-# inverse model encodes at most 6.
+# A knot goal at its crossing number is made from the knot's diagrams; at more crossings its states are
+# enumerated, which stops here (5 crossings already take ~25 s to enumerate).
 MAX_KNOT_CROSSINGS = 5
 _KNOT_SPEC = re.compile(r"^knot:(?P<name>[^@\s]+)@(?P<crossings>\d+)$")
 
@@ -157,10 +158,11 @@ def crossing_number(name: str) -> int:
 def knot_goal(name: str, crossings: int | None = None) -> Goal:
     """Every state of ``crossings`` crossings that really ties ``name`` (both closures are the knot).
 
-    The default is the knot's crossing number (3 for the overhand knot, 4 for the figure-eight, 5 for
-    5_1 and 5_2, 6 for granny and square): no rope with fewer crossings ties it (``twisted knots list``).
-    Prime knots are enumerated up to 5 crossings, composite ones built at 6
-    (:func:`twisted.knots.states_tying`).
+    The default is the knot's crossing number (3 for the overhand knot, 4 for the figure-eight, 6 for
+    6_1, granny and square, 7 for 7_1 ... 7_7 and 3_1#4_1): no rope with fewer crossings ties it
+    (``twisted knots list``). There the states are cut from the knot's KnotInfo diagram (composites:
+    joined from their summands'), nothing enumerated; above it they are enumerated, up to
+    :data:`MAX_KNOT_CROSSINGS` (:func:`twisted.knots.states_tying`).
     """
     from twisted.knots import KNOTOID, MAX_BUILT_CROSSINGS, KnotNameError, resolve_knot, states_tying
 

@@ -29,7 +29,6 @@ from typing import NamedTuple, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from twisted.rope import LINK_SPACING_M
 from twisted.sim import CURVE_HIGH, CURVE_LOW, N_LINKS, Curve, sample_curve
 from twisted.topology import cross2, projected_crossings
 
@@ -38,7 +37,6 @@ __all__ = [
     "across_curve",
     "cross_fit",
     "cross_move_curve",
-    "cross_reach",
     "propose_curve",
     "segment_bounds",
     "segment_points",
@@ -191,23 +189,6 @@ def cross_fit(points: npt.ArrayLike, move: CrossMove, bounds: npt.NDArray[np.flo
     pts = np.asarray(points, dtype=np.float64)
     aim = _cross_aim(pts, move, segment_bounds(pts) if bounds is None else bounds)
     return float(aim.fits.mean())
-
-
-def cross_reach(
-    points: npt.ArrayLike, move: CrossMove, bounds: npt.NDArray[np.float64] | None = None
-) -> float:
-    """How far the tip of ``move``'s end segment has to travel, in lengths of that end's free piece: the
-    distance on the table from the tip to the nearest point of the crossed segment that a straight carry
-    crosses with the move's sign, over the length of rope from the tip to its first crossing. A carried
-    tip ends at most that length from its first crossing unless it pulls rope through it: past 2 it must,
-    past 1 it may. ``inf`` where no point fits (``cross_fit`` 0). Read by ``bench/cross_fit.py``."""
-    pts = np.asarray(points, dtype=np.float64)
-    bounds = segment_bounds(pts) if bounds is None else bounds
-    aim = _cross_aim(pts, move, bounds)
-    if not aim.fits.any():
-        return float("inf")
-    free = bounds[move.segment + 1] - bounds[move.segment]  # the end segment's length in links
-    return float(aim.dist[aim.fits].min() / (free * LINK_SPACING_M))
 
 
 def cross_move_curve(rng: np.random.Generator, points: npt.ArrayLike, move: CrossMove) -> Curve:

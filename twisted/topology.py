@@ -364,7 +364,7 @@ def top(points: npt.ArrayLike) -> PData:
 
 def p_data_of(pc: ProjectedCrossings) -> PData:
     """The P-data of an open rope's crossings (:func:`projected_crossings`, or crossings whose over
-    strands and signs a caller decided otherwise, as ``twisted.drag`` does)."""
+    strands and signs a caller decided otherwise)."""
     k = len(pc)
     if k == 0:
         return EMPTY

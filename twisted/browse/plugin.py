@@ -20,8 +20,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import sys
 import tempfile
-import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
@@ -32,12 +33,13 @@ from datasette import hookimpl
 from datasette.utils.asgi import Response
 from markupsafe import Markup, escape
 
+from twisted.browse import pages
+from twisted.browse.pages import stored_parameters
 from twisted.browse.queries import PLUGIN
 from twisted.browse.svg import gauss_svg, knot_words, p_data_of_cell, rope_svg
 
 _KNOT_COLUMNS = {"knot_type", "closure_under", "closure_over", "goal_knot", "knot_before", "knot_after"}
 _KEY_COLUMNS = {"key", "state", "goal_key", "start_key", "recorded_key", "result_key"}
-_PICTURES_KEPT = 256
 
 # A rope in each state, looked up once per key (the first stored one never changes).
 _ROPE_OF_STATE = """
@@ -59,6 +61,10 @@ def _column(row: Any, name: str) -> Any:
 
 def _link(href: str, text: str) -> str:
     return f'<a href="{escape(href)}">{escape(text)}</a>'
+
+
+def _run_page(datasette: Any, run_id: int) -> str:
+    return str(datasette.urls.path(f"/-/twisted/runs/{run_id}"))
 
 
 def _run_links(datasette: Any, database: str, run_id: int, kind: str, solved: bool) -> str:
@@ -120,18 +126,19 @@ def _p_data_cell(datasette: Any, database: str, value: str) -> Callable[[], Any]
 
 def _parameters_cell(value: str) -> Markup | None:
     """A run's parameters folded: the planner and goal (if any) in the summary, all of them inside."""
+    parameters = stored_parameters(value)
+    if not parameters:
+        return None  # not JSON, too long or too deep: Datasette shows the start of the text
     try:
-        parameters = json.loads(value)
-    except ValueError:
-        return None
-    if not isinstance(parameters, dict) or not parameters:
+        folded = json.dumps(parameters, indent=1)
+    except (ValueError, RecursionError):
         return None
     shown = [f"{name}: {parameters[name]}" for name in ("planner", "goal_spec") if name in parameters]
     summary = "; ".join(shown) or f"{len(parameters)} parameters"
     summary = summary if len(summary) <= 100 else summary[:99] + "…"
     return Markup(
         f"<details><summary>{escape(summary)}</summary>"
-        f"<pre style='white-space:pre-wrap;font-size:0.8em'>{escape(json.dumps(parameters, indent=1))}</pre>"
+        f"<pre style='white-space:pre-wrap;font-size:0.8em'>{escape(folded)}</pre>"
         "</details>"
     )
 
@@ -156,12 +163,13 @@ def render_cell(row: Any, value: Any, column: str, table: str | None, database: 
         return _parameters_cell(value)
     if table == "runs" and column == "kind" and isinstance(value, str):
         links = _run_links(datasette, database, row["id"], value, _column(row, "message") == "solved")
+        links = " · ".join(filter(None, [_link(_run_page(datasette, row["id"]), "story"), links]))
         return Markup(f"{escape(value)}<br><small>{links}</small>") if links else None
     if table == "search_runs" and column == "outcome" and isinstance(value, str):
         links = _run_links(datasette, database, row["run_id"], "plan", value == "solved")
         return Markup(f"{escape(value)}<br><small>{links}</small>")
     if table is None and column in ("run_id", "plan_run_id") and isinstance(value, int):
-        run = _link(f"{datasette.urls.table(database, 'runs')}/{value}", str(value))
+        run = _link(_run_page(datasette, value), str(value))  # the run's story
         kind = "plan" if column == "plan_run_id" else _column(row, "run_kind")
         links = _run_links(datasette, database, value, kind or "", solved=_column(row, "solved") == 1)
         return Markup(f"{run}<br><small>{links}</small>" if links else run)
@@ -173,92 +181,180 @@ def render_cell(row: Any, value: Any, column: str, table: str | None, database: 
 
 # ------------------------------------------------------------------ pictures drawn on demand
 
-
-_Make = Callable[[Path], tuple[Path, str]]  # draws into a folder: the file and its content type
-
-
-class _Pictures:
-    """The matplotlib pictures of one store: drawn in a worker thread, one at a time (pyplot keeps
-    global state), the last few kept."""
-
-    def __init__(self, db_url: str) -> None:
-        self.db_url = db_url
-        self._store: Any = None
-        self._lock = threading.Lock()
-        self._kept: OrderedDict[tuple[str, str], tuple[bytes, str]] = OrderedDict()
-
-    def store(self) -> Any:
-        if self._store is None:
-            from twisted.store import open_store
-
-            self._store = open_store(self.db_url, create=False, readonly=True)
-        return self._store
-
-    def draw(self, what: tuple[str, str], make: _Make) -> tuple[bytes, str]:
-        """``make(folder)`` draws into a fresh folder and names the file and its content type."""
-        with self._lock:
-            if what not in self._kept:
-                with tempfile.TemporaryDirectory(prefix="twisted-browse-") as folder:
-                    path, content_type = make(Path(folder))
-                    self._kept[what] = (path.read_bytes(), content_type)
-                while len(self._kept) > _PICTURES_KEPT:
-                    self._kept.popitem(last=False)
-            self._kept.move_to_end(what)
-            return self._kept[what]
+PICTURE_TIME_LIMIT_S = 60.0  # a picture not drawn by then is refused (503) and its drawing killed
+_PICTURES_KEPT = 256
+_Answer = tuple[int, bytes, str]  # status, body, content type
+_kept: OrderedDict[tuple[str, ...], _Answer] = OrderedDict()
+_one_at_a_time = asyncio.Semaphore(1)  # matplotlib is CPU-bound: one drawing at a time
 
 
-_pictures: dict[str, _Pictures] = {}
+def _child_env() -> dict[str, str]:
+    """The environment of a drawing child: this process's, with the folder this twisted is imported from
+    first on the path (the child must draw with the same code)."""
+    root = str(Path(__file__).resolve().parents[2])  # twisted/browse/plugin.py -> the folder above twisted/
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    env.setdefault("MPLBACKEND", "Agg")
+    return env
 
 
-def _pictures_of(datasette: Any) -> _Pictures:
+async def draw_picture(db_url: str, kind: str, arg: str, suffix: str, limit_s: float) -> _Answer:
+    """One picture drawn by a child process (:mod:`twisted.browse.draw`), killed after ``limit_s``:
+    (200, the file, its type), (404, why it cannot be drawn), or (503, over the time limit). When the
+    request is cancelled (the server stops), the child is killed with it."""
+    content_type = {"svg": "image/svg+xml", "png": "image/png", "gif": "image/gif"}[suffix]
+    async with _one_at_a_time:
+        with tempfile.TemporaryDirectory(prefix="twisted-browse-") as folder:
+            out = Path(folder) / f"picture.{suffix}"
+            child = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "twisted.browse.draw", db_url, str(out), kind, arg,
+                stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.DEVNULL,
+                stderr=asyncio.subprocess.PIPE, env=_child_env(),
+            )  # fmt: skip
+            try:
+                _, error = await asyncio.wait_for(child.communicate(), limit_s)
+            except TimeoutError:
+                late = f"not drawn: the drawing took over {limit_s:g} s, the time limit"
+                return 503, late.encode(), "text/plain"
+            finally:
+                if child.returncode is None:
+                    child.kill()
+                    await child.wait()
+            if child.returncode == 0 and out.is_file():
+                return 200, out.read_bytes(), content_type
+            reason = error.decode("utf-8", "replace").strip()[-500:] or f"exit {child.returncode}"
+            return (404 if child.returncode == 2 else 500), reason.encode(), "text/plain"
+
+
+async def _picture(datasette: Any, kind: str, arg: str, suffix: str) -> Response:
     db_url = (datasette.plugin_config(PLUGIN) or {})["db_url"]
-    if db_url not in _pictures:
-        _pictures[db_url] = _Pictures(db_url)
-    return _pictures[db_url]
-
-
-async def _picture(datasette: Any, what: tuple[str, str], make: _Make) -> Response:
-    from twisted.render import RenderError
-
-    pictures = _pictures_of(datasette)
-    try:
-        body, content_type = await asyncio.get_running_loop().run_in_executor(None, pictures.draw, what, make)
-    except RenderError as exc:
-        return Response.text(str(exc), status=404)
-    return Response(body, content_type=content_type, headers={"Cache-Control": "max-age=600"})
+    what = (db_url, kind, arg, suffix)
+    answer = _kept.get(what)
+    if answer is None:
+        answer = await draw_picture(db_url, kind, arg, suffix, PICTURE_TIME_LIMIT_S)
+        if answer[0] < 500:  # a picture, or why it cannot be drawn; a drawing cut short is tried again
+            _kept[what] = answer
+            while len(_kept) > _PICTURES_KEPT:
+                _kept.popitem(last=False)
+    else:
+        _kept.move_to_end(what)
+    status, body, content_type = answer
+    headers = {"Cache-Control": "max-age=600"} if status == 200 else {}
+    if content_type == "text/plain":
+        content_type = "text/plain; charset=utf-8"
+    return Response(body, status=status, content_type=content_type, headers=headers)
 
 
 async def _state_picture(datasette: Any, request: Any) -> Response:
-    from twisted.render import render_goal
-
     p_data = p_data_of_cell(request.args.get("key", ""))
     if p_data is None:
         return Response.text('give ?key=P-DATA, a state\'s key, e.g. [[1,"O",2,"+"],[2,"U",1,"+"]]', 400)
-    pictures = _pictures_of(datasette)
-
-    def make(folder: Path) -> tuple[Path, str]:
-        return render_goal(pictures.store(), p_data, folder / "state.svg").files[0], "image/svg+xml"
-
-    return await _picture(datasette, ("state", p_data.key), make)
+    return await _picture(datasette, "state", p_data.key, "svg")
 
 
 async def _plan_picture(datasette: Any, request: Any) -> Response:
-    from twisted.render import render_run
-
     run_id, kind = int(request.url_vars["run_id"]), request.url_vars["kind"]
-    pictures = _pictures_of(datasette)
+    return await _picture(datasette, "plan", str(run_id), kind)
 
-    def make(folder: Path) -> tuple[Path, str]:
-        gif = folder / "plan.gif" if kind == "gif" else None
-        files = render_run(pictures.store(), run_id, folder / "plan.png", gif, gl=False).files
-        return files[-1], f"image/{kind}"
 
-    return await _picture(datasette, (f"run {run_id}", kind), make)
+# ------------------------------------------------------------------ the front page and run pages
+
+
+def _page_number(request: Any) -> int:
+    text = request.args.get("page", "1")
+    return int(text) if text.isdigit() and 0 < len(text) < 7 and int(text) > 0 else 1
+
+
+async def _html(datasette: Any, request: Any, title: str, body: Markup, status: int = 200) -> Response:
+    template = datasette.jinja_env.from_string(
+        '{% extends "base.html" %}{% block title %}{{ title }}{% endblock %}'
+        '{% block content %}{{ body }}{% endblock %}'
+    )
+    html = await datasette.render_template(template, {"title": title, "body": body}, request=request)
+    return Response.html(html, status=status)
+
+
+async def _front_page(datasette: Any, request: Any) -> Response:
+    from twisted.browse.server import DATABASE
+
+    page = _page_number(request)
+    database = datasette.get_database(DATABASE)
+    runs = (await database.execute(pages.RUNS, {"offset": (page - 1) * pages.RUNS_A_PAGE})).rows
+    examples = (datasette.plugin_config(PLUGIN) or {}).get("examples", {})
+    body = pages.front_page(runs, page, lambda run_id: _run_page(datasette, run_id), examples)
+    return await _html(datasette, request, "twisted store", body)
+
+
+async def _run_story(datasette: Any, request: Any) -> Response:
+    from twisted.browse.server import DATABASE
+
+    run_id, page = int(request.url_vars["run_id"]), _page_number(request)
+    database = datasette.get_database(DATABASE)
+    ids = {"run_id": run_id}
+    run = (await database.execute(pages.RUN, ids)).first()
+    if run is None:
+        missing = Markup(f"<p>No run {run_id} in this store.</p>")
+        return await _html(datasette, request, "no such run", missing, 404)
+    search = (await database.execute(pages.SEARCH, ids)).first()
+    calls = (await database.execute(pages.RUN_CALLS, ids)).first()
+    pull_test = (await database.execute(pages.PULL_TEST, ids)).first()
+    nodes = []
+    if calls["nodes"]:
+        offset = (page - 1) * pages.NODES_A_PAGE
+        nodes = (await database.execute(pages.RUN_NODES, {**ids, "offset": offset})).rows
+    urls = {
+        "self": _run_page(datasette, run_id),
+        "plan": datasette.urls.path(f"/-/twisted/runs/{run_id}/plan"),
+        "tree": f"{datasette.urls.query(DATABASE, 'run_tree')}?run_id={run_id}",
+        "nodes": f"{datasette.urls.table(DATABASE, 'search_nodes')}?run_id={run_id}",
+    }
+    body = pages.run_page(
+        run, search, calls, pull_test, nodes, page, urls, lambda other: _run_page(datasette, other)
+    )
+    return await _html(datasette, request, f"run {run_id}", body)
+
+
+# ------------------------------------------------------------------ routes
 
 
 @hookimpl
 def register_routes(datasette: Any) -> list[tuple[str, Any]]:
     return [
+        (r"^/$", _front_page),
+        (r"^/-/twisted/runs/(?P<run_id>\d{1,18})$", _run_story),
         (r"^/-/twisted/state\.svg$", _state_picture),
         (r"^/-/twisted/runs/(?P<run_id>\d{1,18})/plan\.(?P<kind>png|gif)$", _plan_picture),
     ]
+
+
+# ------------------------------------------------------------------ errors
+
+
+@hookimpl(tryfirst=True)
+def handle_exception(datasette: Any, request: Any, exception: Exception) -> Any:
+    """An error page without Datasette's console traceback: a refused query (a 4xx: bad SQL, a write
+    SQLite refused) prints nothing on the server's terminal, anything else one line."""
+    from datasette.utils.asgi import Base400
+    from datasette.views.base import DatasetteError
+
+    title = None
+    if isinstance(exception, Base400):
+        status, message = exception.status, str(exception.args[0] if exception.args else exception)
+    elif isinstance(exception, DatasetteError):
+        status, message, title = exception.status, str(exception.message), exception.title
+    elif isinstance(exception, RecursionError):  # e.g. ?_json=COLUMN on a stored value nested 200,000 deep
+        status, message = 400, "a stored value is nested too deep to be read as JSON: not shown"
+    else:
+        status, message = 500, f"{type(exception).__name__}: {exception}"
+    if status >= 500:
+        shown = " ".join(message.split())[:300]
+        print(f"twisted browse: {status} on {request.path[:200]}: {shown}", file=sys.stderr)
+
+    async def page() -> Response:
+        info = {"ok": False, "error": message, "status": status, "title": title}
+        if request.path.endswith(".json"):
+            return Response.json(info, status=status)
+        html = await datasette.render_template(["error.html"], info, request=request)
+        return Response.html(html, status=status)
+
+    return page

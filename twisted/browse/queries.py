@@ -9,9 +9,11 @@ can return thousands of rows (a run's tree, the ropes of one state) show 100 a p
 
 from __future__ import annotations
 
+from html import escape
 from typing import Any
+from urllib.parse import urlencode
 
-__all__ = ["PAGE_ROWS", "PLUGIN", "QUERIES", "metadata"]
+__all__ = ["EXAMPLE_ROWS", "PAGE_ROWS", "PLUGIN", "QUERIES", "TIED", "examples", "metadata"]
 
 PLUGIN = "twisted-browse"
 PAGE_ROWS = 100
@@ -47,7 +49,19 @@ LEFT JOIN search_nodes parent ON parent.id = n.parent_id
 ORDER BY t.depth, n.seq
 """
 
-KNOTS_TIED = """
+# What each run tied: the knots_tied view without the knot a run started from (an untie run's tree holds
+# the trefoil it was given from its root on; that is not a knot it tied). A run's start is its first root.
+TIED = """
+SELECT k.* FROM knots_tied k
+WHERE NOT EXISTS (
+    SELECT 1 FROM search_nodes n JOIN topological_states s ON s.id = n.state_id
+    WHERE n.run_id = k.run_id AND n.parent_id IS NULL AND s.knot_type = k.knot_type
+      AND n.seq = (SELECT MIN(m.seq) FROM search_nodes m WHERE m.run_id = k.run_id AND m.parent_id IS NULL)
+)
+"""
+
+KNOTS_TIED = f"""
+WITH k AS ({TIED})
 SELECT k.knot_type, k.run_id, k.run_kind, k.configurations, k.states,
        COALESCE(
          (SELECT c.points FROM topological_states s JOIN configurations c ON c.state_id = s.id
@@ -55,7 +69,7 @@ SELECT k.knot_type, k.run_id, k.run_kind, k.configurations, k.states,
          (SELECT n.points FROM topological_states s JOIN search_nodes n ON n.state_id = s.id
           WHERE s.knot_type = k.knot_type AND n.run_id = k.run_id ORDER BY n.id LIMIT 1)
        ) AS example_points, k.first_seen
-FROM knots_tied k
+FROM k
 ORDER BY k.knot_type, k.run_id
 """
 
@@ -138,8 +152,9 @@ QUERIES: dict[str, dict[str, Any]] = {
         "title": "Knots tied, per run",
         "description_html": (
             "Which knots the collected data (<code>collect</code> runs) and the planner trees "
-            "(<code>plan</code> runs) have really tied: both closures agree, the unknot and knotoids "
-            "left out (the <code>knots_tied</code> view), with the first rope of each."
+            "(<code>plan</code>, <code>untie</code> runs) have really tied: both closures agree, the unknot "
+            "and knotoids left out (the <code>knots_tied</code> view), and the knot a run started from "
+            "(an untie run's) not counted as tied; with the first rope of each."
         ),
         "sql": KNOTS_TIED,
     },
@@ -208,9 +223,53 @@ _TABLES: dict[str, dict[str, Any]] = {
 }
 
 
-def metadata(database: str, db_url: str) -> dict[str, Any]:
-    """Datasette metadata for the store file served as ``database``: the canned queries, the table
-    notes and the plugin's own settings (``db_url``: where it reads what it renders beyond one cell)."""
+# An example for each canned query that takes parameters, from the store itself (a row of each SELECT)
+EXAMPLE_ROWS = {
+    "run_tree": (
+        "SELECT run_id FROM search_runs ORDER BY outcome = 'solved' DESC, run_id DESC LIMIT 1",
+        ("run_id",),
+    ),
+    "eval_goals": (
+        "SELECT ps.name, r.planner FROM eval_results r JOIN problem_sets ps ON ps.id = r.set_id "
+        "ORDER BY r.id DESC LIMIT 1",
+        ("set_name", "label"),
+    ),
+    "state_reached_by": (
+        "SELECT key FROM topological_states WHERE length(key) < 1000 ORDER BY cross DESC, id LIMIT 1",
+        ("key",),
+    ),
+}
+
+
+def examples(database: str, rows: dict[str, tuple[Any, ...] | None]) -> dict[str, str]:
+    """The example address of every canned query: the plain page, or with the parameters of the
+    example row found in the store (``rows``: the first row of each :data:`EXAMPLE_ROWS` query)."""
+    found = {}
+    for name in QUERIES:
+        address = f"/{database}/{name}"
+        if name in EXAMPLE_ROWS:
+            row = rows.get(name)
+            if row is None:
+                continue
+            address += "?" + urlencode(dict(zip(EXAMPLE_ROWS[name][1], row, strict=True)))
+        found[name] = address
+    return found
+
+
+def metadata(database: str, db_url: str, example_rows: dict[str, tuple[Any, ...] | None]) -> dict[str, Any]:
+    """Datasette metadata for the store file served as ``database``: the canned queries (each with an
+    example from the store, or a note that it has none), the table notes and the plugin's own settings
+    (``db_url``: where it reads what it renders beyond one cell; ``examples``)."""
+    shown = examples(database, example_rows)
+    queries = {}
+    for name, query in QUERIES.items():
+        example = shown.get(name)
+        note = (
+            f" Example: <a href='{escape(example)}'>{escape(example.rsplit('/', 1)[-1])}</a>."
+            if example and "?" in example
+            else " This store has nothing to show here yet." if name in EXAMPLE_ROWS else ""
+        )
+        queries[name] = {**query, "description_html": query["description_html"] + note, "hide_sql": True}
     return {
         "title": "twisted store",
         "description_html": (
@@ -218,10 +277,10 @@ def metadata(database: str, db_url: str) -> dict[str, Any]:
             + ", ".join(f"<a href='/{database}/{name}'>{q['title']}</a>" for name, q in QUERIES.items())
             + "."
         ),
-        "plugins": {PLUGIN: {"db_url": db_url}},
+        "plugins": {PLUGIN: {"db_url": db_url, "examples": shown}},
         "databases": {
             database: {
-                "queries": {name: {**query, "hide_sql": True} for name, query in QUERIES.items()},
+                "queries": queries,
                 "tables": _TABLES,
             }
         },

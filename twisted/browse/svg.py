@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from twisted.knots.catalogue import CATALOGUE
+from twisted.knots.catalogue import knot_words as knot_words_of
 from twisted.render.geometry import (
     ROPE_COLOUR,
     SIGN_COLOUR,
@@ -25,29 +26,19 @@ from twisted.render.geometry import (
     rope_pieces,
     visit_labels,
 )
+from twisted.rope import ROPE
 from twisted.topology import PData, PDataError, parse_p_data, top
 
 __all__ = ["KNOT_WORDS", "blob_points", "gauss_svg", "knot_words", "p_data_of_cell", "rope_svg"]
 
-# What each stored knot_type means in words (names as in docs/DESIGN.md section 9.3).
+# What each stored knot_type means in words (the knot table's, docs/DESIGN.md section 9.3).
 KNOT_WORDS = {
-    "0_1": "unknot",
-    "3_1+": "trefoil (overhand knot), right-handed",
-    "3_1-": "trefoil (overhand knot), left-handed",
-    "4_1": "figure-eight knot",
-    "5_1+": "cinquefoil, positive",
-    "5_1-": "cinquefoil, negative",
-    "5_2+": "three-twist knot, positive",
-    "5_2-": "three-twist knot, negative",
-    "3_1+#3_1+": "granny knot (two right-handed trefoils)",
-    "3_1-#3_1-": "granny knot (two left-handed trefoils)",
-    "3_1+#3_1-": "square (reef) knot",
+    **{knot_type: knot_words_of(knot_type) for knot_type in CATALOGUE},
     "knotoid": "the two closures differ: no knot",
-    "unknown": "a knot outside the catalogue",
+    "unknown": "a knot outside the table",
 }
-assert set(CATALOGUE) <= set(KNOT_WORDS), "every catalogue knot needs its words"
 
-_MAX_LINKS = 1000  # a points BLOB longer than this is not a rope of this project: left to the default
+_MAX_KEY_CHARS = 4096  # a P-data key of 6 crossings is about 80 characters; longer text is not parsed
 
 
 def knot_words(knot_type: object) -> str | None:
@@ -56,18 +47,20 @@ def knot_words(knot_type: object) -> str | None:
 
 
 def blob_points(value: object) -> npt.NDArray[np.float64] | None:
-    """The (n, 3) link points of a ``points`` BLOB (little-endian float64), None when it is not one."""
-    if not isinstance(value, bytes) or not value or len(value) % 24 or len(value) > 24 * _MAX_LINKS:
+    """The (n, 3) link points of a ``points`` BLOB (little-endian float64), None when it is not the rope
+    of this store (the rope profile: ``ROPE.n_points`` finite points; a store of another rope is refused
+    when it is opened)."""
+    if not isinstance(value, bytes) or len(value) != 24 * ROPE.n_points:
         return None
     points = np.frombuffer(value, "<f8").reshape(-1, 3)
-    if len(points) < 2 or not np.isfinite(points).all():
+    if not np.isfinite(points).all():
         return None
     return points
 
 
 def p_data_of_cell(value: object) -> PData | None:
     """The P-data state in a cell (JSON text of a ``p_data`` or ``key`` column), None when it is not one."""
-    if not isinstance(value, str) or not value.startswith("["):
+    if not isinstance(value, str) or not value.startswith("[") or len(value) > _MAX_KEY_CHARS:
         return None
     try:
         return parse_p_data(value)

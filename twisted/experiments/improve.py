@@ -20,7 +20,9 @@ every run (so that ``tune_calls / tune_solved`` charges unsolved runs their whol
 
 Never training on an evaluation goal. The evaluation goals are those of every stored problem set that
 has evaluation results or whose name starts with ``final-``, ``eval-`` or ``tune-``, of every goal-set
-file so named in ``goalsets/``, and of the tuning set. A drawn goal among them is never drawn; a
+file so named in the project's committed ``goalsets/`` (found from the package, whatever the current
+folder; ``--goalsets`` names another folder, which must exist, and a file there that cannot be read
+is refused, not skipped), and of the tuning set. A drawn goal among them is never drawn; a
 ``--train-set`` holding one is refused (:class:`EvalInputError`); and training holds out the stored
 ones (``hold_out_sets``: the trees of runs toward them and every sample reaching one of their states).
 
@@ -41,7 +43,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import func, select
 
-from twisted.experiments.problems import EvalInputError, parse_goal_file
+from twisted.experiments.problems import EvalInputError, decode_goal_file, parse_goal_file
 from twisted.goals import Goal, make_goal, state_goal
 from twisted.store.experiments import EvalResult, Problem, ProblemSet
 from twisted.store.improve import ImproveGeneration
@@ -63,6 +65,9 @@ log = logging.getLogger(__name__)
 DISTRIBUTIONS = {"u4": 4, "u5": 5, "u6": 6}
 # Stored sets and goal-set files whose names start so are evaluation (or tuning) sets
 EVALUATION_PREFIXES = ("final-", "eval-", "tune-")
+# The goal-set files committed with the project (the sets behind the figures): the folder beside the
+# package, found from it so the guard does not depend on the folder a command is run from
+COMMITTED_GOALSETS = Path(__file__).resolve().parents[2] / "goalsets"
 
 
 @dataclass(frozen=True)
@@ -88,7 +93,7 @@ class ImproveConfig:
     epochs: int = 10
     batch_size: int = 128
     init_model_id: int | None = None
-    goalsets_dir: str = "goalsets"
+    goalsets_dir: str | None = None  # None: COMMITTED_GOALSETS
     # how it runs, not what it learns: searches at once (each its own spawned process, one core) and the
     # torch device fine-tuning runs on
     parallel: int = 1
@@ -129,11 +134,26 @@ class ImproveConfig:
                 raise EvalInputError(f"{name} must be at least 1, got {cap}")
         if self.tune_goals is not None and self.tune_goals < 1:
             raise EvalInputError(f"--tune-goals must be at least 1, got {self.tune_goals}")
+        _file_goals(self.goal_files_folder())  # every evaluation goal file readable, before the store opens
         unknown = [d for d in self.distributions if d not in DISTRIBUTIONS]
         if unknown or not self.distributions:
             raise EvalInputError(
                 f"--draw {', '.join(map(repr, unknown)) or '(none)'}: choose among {', '.join(DISTRIBUTIONS)}"
             )
+
+    def goal_files_folder(self) -> Path:
+        """The folder of evaluation goal-set files (``--goalsets``, else the committed one); it must
+        exist, or the guard against training on evaluation goals would check nothing."""
+        folder = COMMITTED_GOALSETS if self.goalsets_dir is None else Path(self.goalsets_dir)
+        if not folder.is_dir():
+            given = f"--goalsets {self.goalsets_dir}" if self.goalsets_dir is not None else f"{folder}"
+            what = "is not a folder" if folder.exists() else "does not exist"
+            hint = "" if self.goalsets_dir is not None else " (the project's own goalsets/); give --goalsets"
+            raise EvalInputError(
+                f"{given} {what}: it must hold the evaluation goal-set files (final-, eval-, tune-*.json) "
+                f"so that no training goal is one of theirs{hint}"
+            )
+        return folder
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -155,12 +175,20 @@ def evaluation_set_names(session: Any, tune_set: str | None = None) -> list[str]
 
 
 def _file_goals(goalsets_dir: Path) -> dict[str, list[Goal]]:
+    """The goals of every evaluation goal-set file in ``goalsets_dir``; EvalInputError naming a file that
+    cannot be read as one (the guard must not skip it)."""
     out: dict[str, list[Goal]] = {}
-    if not goalsets_dir.is_dir():
-        return out
     for path in sorted(goalsets_dir.glob("*.json")):
-        if path.name.startswith(EVALUATION_PREFIXES):
-            out.update(parse_goal_file(path.read_text(), None))
+        if not path.name.startswith(EVALUATION_PREFIXES):
+            continue
+        try:
+            if not path.is_file():
+                raise EvalInputError("is not a file")
+            out.update(parse_goal_file(decode_goal_file(path.read_bytes()), None))
+        except OSError as exc:
+            raise EvalInputError(f"evaluation goal file {path}: cannot be read ({exc.strerror})") from None
+        except EvalInputError as exc:
+            raise EvalInputError(f"evaluation goal file {path}: {exc}") from None
     return out
 
 
@@ -178,7 +206,7 @@ def evaluation_goal_keys(
     ).all()
     for spec in specs:
         keys.update(make_goal(spec).keys)
-    for goals in _file_goals(goalsets_dir or Path("goalsets")).values():
+    for goals in _file_goals(goalsets_dir or COMMITTED_GOALSETS).values():
         for goal in goals:
             keys.update(goal.keys)
     return frozenset(keys), names
@@ -613,9 +641,8 @@ def improve(
     ctx = _Context(store, config, started + config.hours * 3600.0, say or (lambda _m: None))
     with store.session() as session:
         _set_goals(session, config.tune_set)  # the tuning set must exist
-        ctx.eval_keys, ctx.hold_out = evaluation_goal_keys(
-            session, config.tune_set, Path(config.goalsets_dir)
-        )
+        folder = config.goal_files_folder()
+        ctx.eval_keys, ctx.hold_out = evaluation_goal_keys(session, config.tune_set, folder)
         if config.train_set is not None:
             _check_train_set(
                 _set_goals(session, config.train_set), config.train_set, ctx.eval_keys, ctx.hold_out

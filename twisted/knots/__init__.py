@@ -13,7 +13,7 @@ on the way out decides whether a knot forms. Such a diagram is a knotoid (Turaev
 and pulling the rope's ends apart does not give one answer. So a state ties knot K only when BOTH
 closures are K (:class:`RopeKnot`; true, for example, whenever both ends lie in one face, since then the
 closing arc crosses nothing); otherwise it ties no knot and is named ``"knotoid"``. Under this rule
-each catalogue knot first appears at its crossing number (``bench/bench_knots.py``).
+each knot up to 5 crossings first appears at its crossing number (``bench/bench_knots.py``).
 
 The two routes (they must agree, ``tests/test_knots.py`` checks it on collected data):
 
@@ -38,32 +38,35 @@ Invariants (computed here, no dependency):
   tells a knot from its mirror (``V_mirror(t) = V(1/t)``).
 
 Chirality. A crossing's sign is the P-data sign ``sign((d_over x d_under) . e_z)``, the usual
-right-hand rule. ``"+"`` names the mirror image whose minimal diagram has only positive crossings:
-``3_1+`` is the right-handed trefoil, ``V = t + t^3 - t^4``; so the 3-crossing rope whose visits
-alternate O/U with one common sign ``+`` ties ``3_1+``. Likewise ``5_1+`` and ``5_2+`` are the
-positive 5-crossing knots (their Jones polynomials have positive exponents). ``4_1`` is its own
-mirror image.
+right-hand rule, which KnotInfo's PD codes follow as well. ``K+`` names a chiral knot as KnotInfo gives
+it (its PD code has KnotInfo's Jones polynomial), ``K-`` its mirror image (``V_mirror(t) = V(1/t)``);
+for ``3_1``, ``5_1``, ``5_2`` and ``7_1`` ... ``7_5`` that ``+`` is the positive knot: ``3_1+`` is the
+right-handed trefoil, ``V = t + t^3 - t^4``, so the 3-crossing rope whose visits alternate O/U with one
+common sign ``+`` ties ``3_1+``. ``4_1`` and ``6_3`` are their own mirror images.
 
-Identification compares ``(alexander, jones)`` with the catalogue (the knots up to five crossings and
-the granny and square knots); a diagram whose invariants match no entry is ``"unknown"`` (it still
-carries its invariants).
-Within the catalogue the pair separates every entry; a larger knot with the same pair would be
-misnamed, a risk that does not arise for the small diagrams a rope of a few dozen links makes.
+Identification compares ``(alexander, jones)`` with the knot table (:data:`CATALOGUE`: KnotInfo's prime
+knots up to 7 crossings, each chirality, and the sums of two with at most 7 crossings in all); a
+diagram whose invariants match no entry is ``"unknown"`` (it still carries its invariants). Within the
+table the pair separates every entry; a larger knot with the same pair would be misnamed, a risk that
+does not arise for the small diagrams a rope of a few dozen links makes.
 
 Modules:
 
 * :mod:`twisted.knots.gauss`: closed diagrams as signed Gauss codes, their simplification, and the two
   closures of a rope state (P-data) or of a closed polygon (link points).
 * :mod:`twisted.knots.polynomials`: the Alexander polynomial, the Kauffman bracket, the Jones polynomial.
+* :mod:`twisted.knots.knotinfo`: KnotInfo's prime knots up to 7 crossings (PD codes, polynomials).
 * :mod:`twisted.knots.catalogue`: :class:`KnotType`, :func:`invariants` (a diagram named from the
-  catalogue), the catalogue with its crossing numbers and mirrors, and the names a user may type.
+  table), the knot table with its crossing numbers and mirrors, and the names a user may type.
 * :mod:`twisted.knots.rope`: what a rope ties (:class:`RopeKnot`, :func:`identify`,
   :func:`identify_points`).
-* :mod:`twisted.knots.states`: the states that tie a named knot (:func:`states_tying`).
+* :mod:`twisted.knots.states`: the states that tie a named knot (:func:`states_tying`), cut from its
+  KnotInfo diagram at its crossing number (:func:`minimal_states`).
 """
 
 from twisted.knots.catalogue import (
     CATALOGUE,
+    COMMON_NAMES,
     COMPOSITE_NOTE,
     KNOT_NAMES,
     UNKNOWN,
@@ -71,16 +74,27 @@ from twisted.knots.catalogue import (
     KnotType,
     crossing_number,
     invariants,
+    knot_words,
+    knotinfo_name,
+    mirror_name,
     mirror_type,
     resolve_knot,
 )
-from twisted.knots.gauss import GaussCode, closed_gauss_code, gauss_code_from_polygon, simplify
+from twisted.knots.gauss import (
+    GaussCode,
+    closed_gauss_code,
+    gauss_code_from_pd,
+    gauss_code_from_polygon,
+    simplify,
+)
+from twisted.knots.knotinfo import KNOTINFO, MAX_TABLE_CROSSINGS, KnotInfoKnot
 from twisted.knots.polynomials import alexander_polynomial, jones_polynomial, kauffman_bracket
 from twisted.knots.rope import KNOTOID, RopeKnot, identify, identify_points, knot_type_name
 from twisted.knots.states import (
     MAX_BUILT_CROSSINGS,
     MAX_ENUMERATED_CROSSINGS,
     least_crossings,
+    minimal_states,
     prime_states_by_type,
     primed_states,
     rotations,
@@ -90,19 +104,24 @@ from twisted.knots.states import (
 
 __all__ = [
     "CATALOGUE",
+    "COMMON_NAMES",
     "COMPOSITE_NOTE",
+    "KNOTINFO",
     "KNOTOID",
     "KNOT_NAMES",
     "MAX_BUILT_CROSSINGS",
     "MAX_ENUMERATED_CROSSINGS",
+    "MAX_TABLE_CROSSINGS",
     "UNKNOWN",
     "GaussCode",
+    "KnotInfoKnot",
     "KnotNameError",
     "KnotType",
     "RopeKnot",
     "alexander_polynomial",
     "closed_gauss_code",
     "crossing_number",
+    "gauss_code_from_pd",
     "gauss_code_from_polygon",
     "identify",
     "identify_points",
@@ -110,7 +129,11 @@ __all__ = [
     "jones_polynomial",
     "kauffman_bracket",
     "knot_type_name",
+    "knot_words",
+    "knotinfo_name",
     "least_crossings",
+    "minimal_states",
+    "mirror_name",
     "mirror_type",
     "prime_states_by_type",
     "primed_states",

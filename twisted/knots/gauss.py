@@ -9,6 +9,7 @@ diagram of a rope state by an arc under (or over) everything, routed through its
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,7 @@ import numpy.typing as npt
 from twisted.diagram import LEFT, RIGHT, diagram
 from twisted.topology import PData, projected_crossings
 
-__all__ = ["GaussCode", "closed_gauss_code", "gauss_code_from_polygon", "simplify"]
+__all__ = ["GaussCode", "closed_gauss_code", "gauss_code_from_pd", "gauss_code_from_polygon", "simplify"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +63,35 @@ class GaussCode:
             else:
                 pd.append((e["under_in"], e["over_in"], e["under_out"], e["over_out"]))
         return pd
+
+
+def gauss_code_from_pd(pd: Sequence[Sequence[int]]) -> GaussCode:
+    """The diagram of a PD code (KnotInfo's: per crossing its four edges from the incoming under edge,
+    counter-clockwise, the edges numbered 1..2N along the knot), walked from edge 1.
+
+    The under strand runs from the first edge to the third; the over strand enters at the fourth edge
+    and leaves at the second when the crossing is positive (the inverse of :meth:`GaussCode.pd_code`),
+    the other way when negative. Raises ValueError for a code that is not a knot's.
+    """
+    m = 2 * len(pd)
+    ends: dict[int, tuple[int, bool]] = {}  # edge -> (crossing, over) where the edge ends
+    signs: list[int] = []
+    for c, edges in enumerate(pd):
+        if len(edges) != 4 or sorted({*edges} - set(range(1, m + 1))):
+            raise ValueError(f"PD crossing {list(edges)} is not four edges among 1..{m}")
+        a, b, _, d = edges
+        if m > 2 and (b - d) % m == 1:
+            signs.append(1)
+            ends[d] = (c, True)
+        elif m > 2 and (d - b) % m == 1:
+            signs.append(-1)
+            ends[b] = (c, True)
+        else:
+            raise ValueError(f"PD crossing {list(edges)}: the over strand's edges do not follow each other")
+        ends[a] = (c, False)
+    if len(ends) != m:
+        raise ValueError(f"PD code {[list(x) for x in pd]} does not walk every edge once")
+    return GaussCode(tuple(ends[e] for e in range(1, m + 1)), tuple(signs))
 
 
 def simplify(code: GaussCode) -> GaussCode:

@@ -8,7 +8,6 @@ its mirror. Naming a diagram by them is :func:`twisted.knots.catalogue.invariant
 from __future__ import annotations
 
 from collections.abc import Sequence
-from fractions import Fraction
 
 from twisted.knots.gauss import GaussCode
 
@@ -36,25 +35,32 @@ def _int_det(rows: list[list[int]]) -> int:
     return sign * a[n - 1][n - 1]
 
 
-def _interpolate(xs: Sequence[int], ys: Sequence[int]) -> list[int]:
-    """Integer coefficients (constant first) of the polynomial through the points (Lagrange)."""
-    n = len(xs)
-    coeffs = [Fraction(0)] * n
-    for i in range(n):
-        basis = [Fraction(1)]  # product of (t - x_j) / (x_i - x_j), built coefficient by coefficient
-        denom = 1
-        for j in range(n):
-            if j == i:
-                continue
-            basis = [Fraction(0), *basis]
-            for m in range(len(basis) - 1):
-                basis[m] -= xs[j] * basis[m + 1]
-            denom *= xs[i] - xs[j]
-        for m in range(n):
-            coeffs[m] += Fraction(ys[i], denom) * basis[m]
-    if any(c.denominator != 1 for c in coeffs):
-        raise ArithmeticError("Alexander interpolation gave non-integer coefficients")
-    return [int(c) for c in coeffs]
+def _interpolate(x0: int, ys: Sequence[int]) -> list[int]:
+    """Integer coefficients (constant first) of the polynomial with values ``ys`` at ``x0, x0 + 1, ...``.
+
+    Newton's forward form: ``p(x) = sum_k (Delta^k y_0 / k!) (x - x0) (x - x0 - 1) ... (x - x0 - k + 1)``;
+    for a polynomial with integer coefficients every ``Delta^k y_0`` is a multiple of ``k!``, so all of it
+    stays in integers.
+    """
+    n = len(ys)
+    diffs, row = [], list(ys)
+    for _ in range(n):
+        diffs.append(row[0])
+        row = [b - a for a, b in zip(row, row[1:], strict=False)]
+    coeffs = [0] * n
+    basis = [1]  # (x - x0) ... (x - x0 - k + 1), constant first
+    factorial = 1
+    for k, d in enumerate(diffs):
+        if k:
+            factorial *= k
+        if d % factorial:
+            raise ArithmeticError("Alexander interpolation gave non-integer coefficients")
+        for m, b in enumerate(basis):
+            coeffs[m] += (d // factorial) * b
+        root = x0 + k
+        padded = [0, *basis, 0]
+        basis = [padded[m] - root * padded[m + 1] for m in range(len(basis) + 1)]
+    return coeffs
 
 
 def alexander_polynomial(code: GaussCode) -> tuple[int, ...]:
@@ -94,8 +100,7 @@ def alexander_polynomial(code: GaussCode) -> tuple[int, ...]:
             row[out_arc[c]] += -1 if s > 0 else t
         return _int_det([r[:-1] for r in rows[:-1]])
 
-    xs = list(range(2, n + 2))
-    coeffs = _interpolate(xs, [minor_at(x) for x in xs])
+    coeffs = _interpolate(2, [minor_at(x) for x in range(2, n + 2)])
     while coeffs and coeffs[-1] == 0:
         coeffs.pop()
     while coeffs and coeffs[0] == 0:

@@ -425,6 +425,45 @@ class InverseModel:
                 f"this inverse model was saved in format {version}, this version of twisted reads format "
                 f"{FORMAT_VERSION}: train a new one with `twisted train`"
             )
-        net = InverseNet(NetConfig.from_dict(blob["config"]))
+        config = _declared_config(blob["config"], blob["state_dict"])
+        net = InverseNet(config)
         net.load_state_dict(blob["state_dict"])
         return cls(net=net, metadata=dict(blob.get("metadata", {})), model_id=model_id)
+
+
+def _declared_config(stored: Any, state_dict: Any) -> NetConfig:
+    """The architecture a stored model declares, checked against its weights before the network is built.
+
+    The network is first made on the meta device (no memory), and every stored tensor must have the
+    shape and dtype it declares: the real network, built next, is then exactly as large as the weights
+    the payload holds (:func:`twisted.store.payloads.load_tensors` bounded those by the row's size).
+    Raises :class:`UnsafePayloadError` otherwise.
+    """
+    if not isinstance(stored, dict) or not isinstance(state_dict, dict):
+        raise UnsafePayloadError("the inverse model's config and weights are not mappings")
+    try:
+        config = NetConfig.from_dict(stored)
+    except TypeError as exc:
+        raise UnsafePayloadError(f"the inverse model's config cannot be read ({exc})") from None
+    sizes = {name: getattr(config, name) for name in ("hidden", "layers", "head_hidden", "components")}
+    bad = next((n for n, v in sizes.items() if type(v) is not int or v < 1), None)
+    if bad is not None:
+        raise UnsafePayloadError(f"the inverse model's config has {bad} = {str(sizes[bad])[:40]!r}")
+    if config.layers > len(state_dict):  # each layer holds weights: more layers than tensors cannot fit
+        raise UnsafePayloadError(
+            f"the inverse model's config declares {config.layers:,} layers but it holds "
+            f"{len(state_dict):,} tensors"
+        )
+    with torch.device("meta"):
+        declared = {k: (tuple(v.shape), v.dtype) for k, v in InverseNet(config).state_dict().items()}
+    held = {
+        k: (tuple(v.shape), v.dtype) if isinstance(v, torch.Tensor) else None for k, v in state_dict.items()
+    }
+    if held != declared:
+        odd = sorted(str(k)[:60] for k in set(held) ^ set(declared))[:3] or [
+            str(k)[:60] for k in declared if held.get(k) != declared[k]
+        ][:3]
+        raise UnsafePayloadError(
+            f"the inverse model's weights do not fit the architecture its config declares (first: {odd})"
+        )
+    return config

@@ -151,7 +151,9 @@ def render_run(
     n_steps = len(path) - 1
     unit = "step" if any(node.action == "cinch" for node in path) else "curve"  # a cinch is a step, no curve
 
-    def frame(i: int) -> Figure:
+    view = _plan_view(path)
+
+    def frame(i: int, fixed: bool = False) -> Figure:
         node = path[i]
         fig, _, ax = panel_figure(images[i] if images else None)
         cinched = ": the cinch" if node.action == "cinch" else ""
@@ -161,17 +163,40 @@ def render_run(
             tied = f" ({info.goal.knot}: {knot_type_name(node.p_data)})" if info.goal.knot else ""
             # knot_type_name: the knot when both closures agree, else "knotoid"
             goal_mark = f"  = goal{tied}"
-        draw_knot_diagram(ax, node.points, title=f"run {run_id}, {what}: {node.p_data.key}{goal_mark}")
+        title = f"run {run_id}, {what}: {node.p_data.key}{goal_mark}"
+        draw_knot_diagram(ax, node.points, title=title, zoom=not fixed)
         next_curve = path[i + 1].curve if i < n_steps else None
         if next_curve is not None:
             draw_curve(ax, node.points, next_curve)
+        if fixed:  # every frame of the GIF on the same axes, so the rope does not jump between frames
+            (x0, y0), (x1, y1) = view
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y0, y1)
+            ax.set_aspect("equal", adjustable="box")
         return fig
 
     files = [save_png(frame(n_steps), out_png)]
     if out_gif is not None:
-        frames = [figure_to_array(frame(i), dpi=80) for i in range(len(path))]
+        frames = [figure_to_array(frame(i, fixed=True), dpi=80) for i in range(len(path))]
         files.append(save_gif(frames, out_gif, frame_s=1.0, last_frame_s=3.0))
     return Rendered(files, backend if images is not None else f"matplotlib ({backend})")
+
+
+def _plan_view(path: list[Any]) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The (x, y) box that holds every rope of a plan and the head of every curve's arrow, with a margin:
+    the axes of each GIF frame."""
+    corners = []
+    for i, node in enumerate(path):
+        xy = np.asarray(node.points, dtype=np.float64)[:, :2]
+        corners += [xy.min(axis=0), xy.max(axis=0)]
+        curve = path[i + 1].curve if i + 1 < len(path) else None
+        if curve is not None:
+            link, _, x_m, y_m = curve
+            centre = (xy[int(link)] + xy[int(link) + 1]) / 2
+            corners.append(centre + (x_m, y_m))
+    lo, hi = np.min(corners, axis=0), np.max(corners, axis=0)
+    margin = 0.08 * float((hi - lo).max()) + 0.02
+    return (float(lo[0] - margin), float(lo[1] - margin)), (float(hi[0] + margin), float(hi[1] + margin))
 
 
 def render_tightened(store: Any, run_id: int, out_png: str | Path) -> Rendered:

@@ -368,7 +368,7 @@ def read_buffer(blob: bytes, what: str, limit: int) -> dict[str, Any]:
             f"{what} is a pickled replay buffer (the format of earlier versions), which is not read: "
             "unpickling can run code. Resume with --no-replay-buffer to continue without it"
         )
-    state = load_tensors(raw, what)
+    state = load_tensors(raw, what, max_bytes=limit)  # its inner archive: no member unpacks further
     if not (
         isinstance(state, dict)
         and state.get("format") == BUFFER_FORMAT
@@ -379,20 +379,28 @@ def read_buffer(blob: bytes, what: str, limit: int) -> dict[str, Any]:
 
 
 def apply_buffer(model: Any, state: dict[str, Any], what: str) -> None:
-    """Copy :func:`read_buffer`'s arrays into ``model``'s replay buffer; they must match it exactly."""
+    """Copy :func:`read_buffer`'s arrays into ``model``'s replay buffer; they must match it exactly.
+
+    Every value's type, shape and dtype is checked against the run's buffer before it is iterated or
+    copied, and no message is built from a stored array's elements (a crafted one may hold billions).
+    """
     import torch
 
     rb = model.replay_buffer
 
     def put(target: Any, value: Any, name: str) -> None:
         if not isinstance(value, torch.Tensor):
-            raise ValueError(f"{name} is not an array")
-        array = value.numpy()
-        if array.shape != target.shape or array.dtype != target.dtype:
-            raise ValueError(
-                f"{name} is {array.dtype}{list(array.shape)}, the run's is {target.dtype}{list(target.shape)}"
-            )
-        target[...] = array
+            raise ValueError(f"{name} is a {type(value).__name__}, not an array")
+        if tuple(value.shape) != target.shape or value.numpy().dtype != target.dtype:
+            shape, want = list(value.shape)[:8], list(target.shape)
+            raise ValueError(f"{name} is {value.dtype}{shape}, the run's is {target.dtype}{want}")
+        target[...] = value.numpy()
+
+    def keys_of(value: Any, name: str, want: Any) -> None:
+        if not isinstance(value, dict):
+            raise ValueError(f"{name} is a {type(value).__name__}, the run's is a dict of {len(want)} arrays")
+        if len(value) != len(want) or not all(isinstance(k, str) and k in want for k in value):
+            raise ValueError(f"{name} has {len(value):,} entries, not the run's {sorted(want)}")
 
     try:
         arrays = state["arrays"]
@@ -400,16 +408,19 @@ def apply_buffer(model: Any, state: dict[str, Any], what: str) -> None:
             target = getattr(rb, name, None)
             if target is None:
                 continue
+            if name not in arrays:
+                raise ValueError(f"{name} is missing")
             if isinstance(target, dict):
-                if set(arrays[name]) != set(target):
-                    raise ValueError(f"{name} has keys {sorted(arrays[name])}, the run's {sorted(target)}")
+                keys_of(arrays[name], name, target)
                 for key in target:
                     put(target[key], arrays[name][key], f"{name}.{key}")
             else:
                 put(target, arrays[name], name)
-        pos, full = int(state["pos"]), bool(state["full"])
+        pos, full = state["pos"], state["full"]
+        if type(pos) is not int or type(full) is not bool:
+            raise ValueError("its position is not a whole number and a flag")
         if not 0 <= pos < rb.buffer_size:
-            raise ValueError(f"position {pos} outside the buffer of {rb.buffer_size}")
+            raise ValueError(f"position {pos:,} outside the buffer of {rb.buffer_size:,}")
         rb.pos, rb.full = pos, full
     except (KeyError, TypeError, ValueError, RuntimeError, AttributeError) as exc:
         raise UnsafePayloadError(f"{what} does not fit the run's replay buffer ({exc})") from None

@@ -155,6 +155,32 @@ def parse_url(url: str | URL) -> URL:
     return parsed
 
 
+def _sqlite_options(parsed: URL, readonly: bool) -> tuple[URL, bool]:
+    """The SQLite URL without its query, and whether it asked to be read-only (``?mode=ro``).
+
+    ``mode=ro`` is honoured: a command that only reads opens the file read-only as it always does, and
+    nothing (not a new database, not an upgrade) is written; a command that writes is refused. Any
+    other option would be silently dropped by the driver, so it is refused too.
+    """
+    if parsed.get_backend_name() != "sqlite" or not parsed.query:
+        return parsed, False
+    shown = f"database URL {_display(parsed)!r}"
+    options = dict(parsed.query)
+    mode = options.pop("mode", None)
+    if options or mode != "ro":
+        given = ", ".join(sorted(options)) if options else f"mode={mode}"
+        raise StoreError(
+            f"{shown}: the SQLite option {_shorten(given)} is not understood (only mode=ro, read-only, is); "
+            "give the file alone, e.g. sqlite:///twisted.db"
+        )
+    if not readonly:
+        raise StoreError(
+            f"{shown} is read-only (mode=ro), and this command writes to the database; nothing was "
+            "written: drop ?mode=ro to let it write, or use a command that only reads"
+        )
+    return parsed.difference_update_query(["mode"]), True
+
+
 def sqlite_path(url: URL) -> Path | None:
     """The file of an SQLite URL, or None for an in-memory database."""
     database = url.database or ""
@@ -603,6 +629,7 @@ def rope_mismatch_message(where: str, stored: Any) -> str:
 def _open_store(
     parsed: URL, *, create: bool, upgrade: bool, readonly: bool = False, verify: bool = False
 ) -> Store:
+    parsed, pinned = _sqlite_options(parsed, readonly)  # pinned: ?mode=ro, nothing may be written
     where = f"database {_display(parsed)!r}"
     heads = head_revisions()
     reads_only = readonly  # as asked (an older schema is upgraded first, but the rope is never recorded)
@@ -611,6 +638,11 @@ def _open_store(
     if path is not None:
         where = f"database file {_shown_path(path)}"
         _check_path_name(path)
+        if pinned and (not path.exists() or set(_inspect_sqlite_file(path, where, readonly=True)) != heads):
+            raise StoreError(
+                f"{where} was given read-only (mode=ro) but does not exist or needs its tables created or "
+                "upgraded first, which writes: run a command without ?mode=ro once"
+            )
         if path.exists():
             current = _inspect_sqlite_file(path, where, readonly=readonly, verify=verify and not readonly)
             if readonly and not current and create:

@@ -345,16 +345,18 @@ CACHED_CROSSINGS = (5,)
 
 def kept_crossings(knot: str | None, crossings: int | None = None) -> int | None:
     """The crossing count whose state sets a goal of ``knot`` enumerates and the store keeps (None: a
-    name that is no knot, which the goal's own check reports, or a count not worth keeping)."""
+    name that is no knot, which the goal's own check reports, a count not worth keeping, or the knot's
+    crossing number, where its states are made from its diagram without enumerating)."""
     from twisted.knots import KnotNameError, least_crossings
 
     if knot is None:
         return None
     try:
-        count = crossings if crossings is not None else least_crossings(knot)
+        least = least_crossings(knot)
     except KnotNameError:
         return None
-    return count if count in CACHED_CROSSINGS else None
+    count = crossings if crossings is not None else least
+    return count if count in CACHED_CROSSINGS and count != least else None
 
 
 def prime_knot_goal(store: Any, knot: str | None, crossings: int | None = None) -> None:
