@@ -112,6 +112,16 @@ def _goal_state_key(run: int, key: str) -> Plant:
     return lambda conn: conn.execute(statement, (key, run))
 
 
+def _configuration(q: np.ndarray) -> Plant:
+    """Configuration 1: the straight rope of run 1's root with ``q`` in its place (``--start-config 1``)."""
+    statement = (
+        "insert into configurations (id, state_id, cross, q, points, created_at) "
+        "select 1, state_id, cross, ?, points, '2026-12-06' from search_nodes where run_id = ? and seq = 0"
+    )
+    return lambda conn: conn.execute(statement, (q.tobytes(), SOLVED))
+
+
+PLAN_ONE = ["plan", "--goal", ONE, "--planner", "random-low", "--workers", "1"]
 RESUME = ["plan", "--resume", str(STOPPED), "--workers", "1", "--max-iterations", "2"]
 UNTIE_IT = ["untie", str(SOLVED), "--planner", "random-low", "--workers", "1", "--timeout", "60"]
 UNTIE_RESUME = ["untie", str(UNTIE), "--resume", "--workers", "1", "--max-iterations", "1"]
@@ -167,6 +177,12 @@ CASES = [
     _case("q all NaN", _end_q(SOLVED, np.full(93, np.nan)), UNTIE_IT, "q: must be finite floats, got 93"),
     _case("q all 1e300", _end_q(SOLVED, np.full(93, 1e300)), UNTIE_IT, "the simulator refuses it: rope left"),
     _case("q all zeros", _end_q(SOLVED, np.zeros(93)), UNTIE_IT, "q: the simulator refuses it"),
+    _case(
+        "start configuration NaN",
+        _configuration(np.full(93, np.nan)),
+        [*PLAN_ONE, "--start-config", "1", "--max-iterations", "2"],
+        "configurations, row 1, q: must be finite floats",
+    ),
     # the nodes of a run's plan (replay, render and untie read them)
     _case("points of 5 floats", _goal_node(SOLVED, "points", bytes(40)), REPLAY, "points: must be float64"),
     _case("curve link 99", _goal_node(SOLVED, "link", 99), REPLAY, "link: must be a link 0..20, got 99"),

@@ -66,7 +66,7 @@ class StoredValueError(ValueError):
 
     def __init__(self, table: str, row: Any, field: str, problem: str) -> None:
         self.table, self.row, self.field, self.problem = table, row, field, problem
-        refused = "the stored value is refused; nothing changed"
+        refused = "damaged in the store: refused, nothing changed"
         super().__init__(f"{table}, row {row}, {field}: {problem} ({refused})")
 
 
