@@ -520,3 +520,32 @@ def test_start_config_is_the_root_of_the_tree(tmp_path: Path) -> None:
         info = load_run(store, json.loads(out)["run_id"])
         assert info is not None and info.start_configuration_id == config_id
         assert np.array_equal(info.nodes[0].q, moved.state)
+
+
+# --- one call runs a search ------------------------------------------------------------------------------
+
+
+def test_run_search_opens_nothing_for_a_bad_goal_and_its_result_serialises_itself(tmp_path: Path) -> None:
+    """run_search is every caller's one call: a bad goal is refused before the store is opened (so no
+    database is created), and a search's result is its own JSON (what `plan --json` prints)."""
+    from twisted.planner import SearchProgress, SearchRequest, run_search
+
+    url = _db(tmp_path)
+    opened: list[bool] = []
+
+    def opener(*, create: bool) -> Any:
+        opened.append(create)
+        return open_store(url) if create else None
+
+    with pytest.raises(PlanInputError, match="--goal"):
+        run_search(opener, SearchRequest(goal="[[1,", workers=1))
+    assert opened == [] and not (tmp_path / "plan.db").exists()
+    progress = SearchProgress()
+    options = {"planner": "random-low", "seed": 0}
+    request = SearchRequest(goal=ONE_CROSSING, options=options, workers=1, timeout_s=600, timed_setup=False)
+    result = run_search(opener, request, progress=progress)
+    assert opened == [True] and result.solved and progress.search is not None
+    payload = json.loads(json.dumps(result.to_dict()))
+    assert payload["run_id"] == result.run_id == progress.search.run_id and payload["outcome"] == "solved"
+    assert payload["reached_state"] == parse_p_data(ONE_CROSSING).to_list() == payload["plan"][-1]["state"]
+    assert payload["sim_calls"] == sum(payload["sim_calls_by_source"].values())

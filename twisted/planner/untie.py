@@ -1,12 +1,13 @@
 """Untie and retie: searches from any stored rope to any goal, the straight rope ``[]`` included.
 
-A search *both ways* (:class:`BothWays`) differs from Algorithm 1 in three places, all small:
+A search *both ways* is Algorithm 1 with three parts swapped (:func:`both_ways_parts`), all small:
 
 - its high level plans with adding and removing moves (:func:`twisted.moves.plans_both_ways`, through
   the plan cache under a key of its own), so a state with more crossings than the goal, or with a
   crossing the goal lacks, has plans too;
-- a result enters ``T`` whenever it has no more crossings than the start or the goal, whichever has
-  more (the paper's rule "Cross does not drop" would forbid every untying step);
+- its growth is :class:`twisted.planner.strategies.BothWays`: a result enters ``T`` whenever it has no
+  more crossings than the start or the goal, whichever has more (the paper's rule "Cross does not
+  drop" would forbid every untying step);
 - the curves of a removing step come from the proposer ``removal_curves`` names: ``model`` (the
   inverse model, conditioned on the removing move, which it encodes apart from the adding one; the
   shipped model has never seen one) or ``random`` (uniform random curves, the ``random-low``
@@ -28,21 +29,20 @@ import numpy as np
 from twisted.goals import Goal, PlanInputError, make_goal, state_goal
 from twisted.moves import sub_states
 from twisted.planner.options import MAX_SEED, OptionSpec
-from twisted.planner.search import Twisted
+from twisted.planner.strategies import BothWays, RandomCurves
 from twisted.topology import EMPTY, PData, parse_p_data
 
 __all__ = [
     "PARAMETERS",
     "REMOVAL_CURVES",
-    "BothWays",
     "RunEnd",
     "accepted_configuration",
     "both_ways_needed",
+    "both_ways_parts",
     "check_start",
     "check_untie_run",
     "make_any_goal",
     "run_end",
-    "search_class",
 ]
 
 # proposers of a removing step's curves (see the module docstring)
@@ -65,52 +65,19 @@ STORED = (
 )
 
 
-class BothWays(Twisted):
-    """Algorithm 1 with adding and removing moves (see the module docstring).
-
-    ``removal_curves``: ``model`` or ``random``, the proposer of a removing step's K curves.
-    The high level given must plan both ways (:func:`twisted.planner.session.high_level` with
-    ``both_ways=True``).
-    """
-
-    def __init__(
-        self,
-        goal: Goal | PData,
-        tree: Any,
-        *args: Any,
-        removal_curves: str = DEFAULT_REMOVAL_CURVES,
-        **kwargs: Any,
-    ) -> None:
-        if removal_curves not in REMOVAL_CURVES:
-            raise ValueError(
-                f"removal_curves must be one of {', '.join(REMOVAL_CURVES)}, got {removal_curves!r}"
-            )
-        self.removal_curves = removal_curves
-        goal = goal if isinstance(goal, Goal) else state_goal(goal)
-        if len(tree) == 0:
-            raise ValueError("the tree needs its root (the initial configuration)")
-        # every state on a plan has at most this many crossings (twisted.moves.plans_both_ways)
-        self.cross_cap = max(tree.nodes[0].p_data.cross, goal.cross)
-        super().__init__(goal, tree, *args, **kwargs)
-
-    def keeps(self, parent: PData, p_data: PData) -> bool:
-        return p_data.cross <= self.cross_cap
-
-    def wants_plans(self, p_data: PData) -> bool:
-        return p_data not in self.goal
-
-    def step_curves(self, node: Any, next_state: PData, move: Any) -> tuple[list[Any], int]:
-        if move is not None and move.remove and self.removal_curves == "random":
-            return self.random_curves.sample(node, None, None, self.options.k, self.rng), 0
-        return super().step_curves(node, next_state, move)
-
-
-def search_class(parameters: Mapping[str, Any]) -> tuple[type[Twisted], dict[str, Any]]:
-    """The search class of a run's stored parameters and the keyword arguments it takes beyond
-    :class:`Twisted`'s (a run stored before removing moves existed searches adding only)."""
-    if parameters.get("both_ways"):
-        return BothWays, {"removal_curves": parameters.get("removal_curves", DEFAULT_REMOVAL_CURVES)}
-    return Twisted, {}
+def both_ways_parts(parameters: Mapping[str, Any], goal: Goal, start: PData) -> dict[str, Any]:
+    """The parts a run's parameters (``runs.parameters``) make a search both ways with, as keyword
+    arguments of :func:`twisted.planner.strategies.default_parts` (``growth``, ``removal``): none for a
+    search that adds crossings only (a run stored before removing moves existed is one). ``start``: the
+    state of the tree's root. Raises :class:`PlanInputError` on a proposer that does not exist."""
+    if not parameters.get("both_ways"):
+        return {}
+    removal_curves = parameters.get("removal_curves", DEFAULT_REMOVAL_CURVES)
+    problem = REMOVAL_SPEC.check(removal_curves)
+    if problem is not None:
+        raise PlanInputError(f"removal_curves {problem}")
+    removal = RandomCurves() if removal_curves == "random" else None
+    return {"growth": BothWays(goal, start), "removal": removal}
 
 
 def both_ways_needed(start: PData, goal: Goal) -> bool:
