@@ -354,7 +354,12 @@ def start_search(
     ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
     when adding moves alone cannot reach the goal from the start.
     """
-    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, accepted_configuration, both_ways_needed, run_end
+    from twisted.planner.untie import (
+        DEFAULT_REMOVAL_CURVES,
+        accepted_configuration,
+        both_ways_needed,
+        run_end,
+    )
     from twisted.store.search import SearchRun
 
     options.validate()
