@@ -145,8 +145,16 @@ def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
 
 
 def stored_options(parameters: Mapping[str, Any], run_id: int | None = None) -> PlannerOptions:
-    """The options a run stored (:meth:`PlannerOptions.from_dict`); PlanInputError when it used an
-    option that was removed, so that it cannot be continued with other behaviour."""
+    """The options a run stored (:meth:`PlannerOptions.from_dict`), each checked by its declaration as
+    the command line's value is (StoredValueError naming the field, :mod:`twisted.store.boundary`), with
+    what a both-ways search stored (:data:`twisted.planner.untie.STORED`); PlanInputError when it used
+    an option that was removed, so that it cannot be continued with other behaviour."""
+    from twisted.planner.options import specs
+    from twisted.planner.untie import STORED
+    from twisted.store.boundary import check_declared
+
+    row = "?" if run_id is None else run_id
+    check_declared(parameters, (*specs(), *STORED), "runs", row, "parameters")
     try:
         return PlannerOptions.from_dict(parameters)
     except ValueError as exc:
@@ -178,15 +186,17 @@ def search_parts(
     return default_parts(options, goal, sampler, goal_test, **variant)
 
 
-def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None = None) -> PlannerOptions:
+def planner_options(
+    given: Mapping[str, Any], stored: Mapping[str, Any] | None = None, run_id: int | None = None
+) -> PlannerOptions:
     """The options of a search from those asked for (a value of None: not given, the default).
 
-    For a resumed run ``stored`` (its ``runs.parameters``) holds, and every option given must agree
-    with it. Raises :class:`PlanInputError` naming the options that clash or are out of range.
+    For a resumed run ``stored`` (run ``run_id``'s ``runs.parameters``) holds, and every option given must
+    agree with it. Raises :class:`PlanInputError` naming the options that clash or are out of range.
     """
     asked = {name: value for name, value in given.items() if value is not None}
     if stored is not None:
-        kept = stored_options(stored).to_dict()
+        kept = stored_options(stored, run_id).to_dict()
         clash = [f"--{n.replace('_', '-')} {v} (run has {kept[n]})" for n, v in asked.items() if kept[n] != v]
         if clash:
             message = f"a resumed run keeps its own search options; drop or fix: {', '.join(clash)}"
@@ -268,7 +278,8 @@ def choose_run(
     if model_id is not None and parameters.get("model_id") not in (None, model_id):
         used = parameters.get("model_id")
         raise PlanInputError(f"--model {model_id}: run {run_id} was searched with model {used}")
-    return RunChoice(run_id, planner_options(given, stored=parameters), parameters.get("model_id", model_id))
+    options = planner_options(given, stored=parameters, run_id=run_id)
+    return RunChoice(run_id, options, parameters.get("model_id", model_id))
 
 
 class _Logged:
@@ -344,7 +355,12 @@ def start_search(
     ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
     when adding moves alone cannot reach the goal from the start.
     """
-    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, both_ways_needed, run_end
+    from twisted.planner.untie import (
+        DEFAULT_REMOVAL_CURVES,
+        accepted_configuration,
+        both_ways_needed,
+        run_end,
+    )
     from twisted.store.search import SearchRun
 
     options.validate()
@@ -369,6 +385,7 @@ def start_search(
                 message = f"configuration {start_configuration_id} is not in this database"
                 raise PlanInputError(message) from None
             q, points = config.q_array(), config.points_array()
+        accepted_configuration(q, points, "configurations", start_configuration_id)
         root = _root(q, points, top(points))
     if root.p_data in goal:
         raise PlanInputError(f"the initial configuration is already in the goal state {root.p_data.key}")
