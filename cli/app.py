@@ -156,10 +156,33 @@ class _Commands(TyperGroup):
         except BaseException as exc:
             code = runtime.exit_code(exc)
             if code is None:
+                _refuse_stored_value(exc)
                 raise
-            err_console.print(f"interrupted (exit {code}) before the command finished", highlight=False)
             runtime.received.clear()  # reported
+            if _running.done is not None:
+                err_console.print(
+                    f"interrupted after {_running.done}: that stands (exit 0); what the command had left "
+                    "to do after it (printing, a picture) may be cut short",
+                    highlight=False,
+                )
+                raise typer.Exit(EXIT_OK) from None
+            err_console.print(f"interrupted (exit {code}) before the command finished", highlight=False)
             raise typer.Exit(code) from None
+
+
+def done_before_interrupt(what: str) -> None:
+    """The command has stored ``what`` for good (e.g. "run 6 was solved and stored"): a Ctrl-C or SIGTERM
+    from here on ends it with exit 0 and a line saying so, not 130 (which means "resume it")."""
+    _running.done = what
+
+
+def _refuse_stored_value(exc: BaseException) -> None:
+    """A value read back from the store that its boundary refused (:mod:`twisted.store.boundary`): exit 2
+    with "table, row, field: what is wrong", whichever command read it."""
+    from twisted.store.boundary import StoredValueError
+
+    if isinstance(exc, StoredValueError):
+        fail(str(exc))
 
 
 class Commands(typer.Typer):
@@ -202,6 +225,7 @@ class AppState:
     log_file: Path | None = None
     verbose: bool = False
     force: bool = False
+    done: str | None = None  # what the command has stored for good (done_before_interrupt)
 
 
 # the global options of the command that runs (what unwritable() checks outputs against)

@@ -23,6 +23,7 @@ from cli.app import (
     app,
     check_workers,
     console,
+    done_before_interrupt,
     err_console,
     fail,
     open_db,
@@ -190,6 +191,8 @@ def plan_command(
     if picture is not None:
         picture = _picture_file(picture)
     result, exit_code = run_shown(ctx, request, as_json)
+    if result.solved:
+        done_before_interrupt(f"run {result.run_id} was solved and stored")
     print_result(result, as_json)
     if result.solved:
         if picture is not None:

@@ -12,7 +12,16 @@ from typing import Annotated
 
 import typer
 
-from cli.app import EXIT_NOT_REACHED, EXIT_OK, app, err_console, seed_option
+from cli.app import (
+    EXIT_NOT_REACHED,
+    EXIT_OK,
+    app,
+    done_before_interrupt,
+    err_console,
+    fail,
+    open_db,
+    seed_option,
+)
 from cli.commands_plan import (
     OUTPUT,
     START,
@@ -78,10 +87,26 @@ def untie_command(
         **budget(workers, timeout_s, max_iterations, checkpoint_every_s),
     )
     check_search(request)
+    if resume:
+        _check_untie_run(ctx, run_id)
     result, exit_code = run_shown(ctx, request, as_json)
+    if result.solved:
+        done_before_interrupt(f"run {result.run_id} was solved and stored")
     print_result(result, as_json)
     interrupted = result.status == "interrupted"
     if interrupted:
         resume_hint = f"`twisted untie --resume {result.run_id}`"
         err_console.print(f"interrupted: checkpoint saved; continue with {resume_hint}", highlight=False)
     raise typer.Exit(EXIT_OK if result.solved else exit_code if interrupted else EXIT_NOT_REACHED)
+
+
+def _check_untie_run(ctx: typer.Context, run_id: int) -> None:
+    """``--resume RUN_ID``: exit 2 unless the run is an untie run (a tying search is `plan --resume`'s)."""
+    from twisted.planner import PlanInputError
+    from twisted.planner.untie import check_untie_run
+
+    with open_db(ctx, readonly=True, needed_by=f"--resume {run_id}") as store:
+        try:
+            check_untie_run(store, run_id)
+        except PlanInputError as exc:
+            fail(str(exc))

@@ -6,6 +6,7 @@ every run here is the same run each time.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import signal
@@ -549,3 +550,26 @@ def test_run_search_opens_nothing_for_a_bad_goal_and_its_result_serialises_itsel
     assert payload["run_id"] == result.run_id == progress.search.run_id and payload["outcome"] == "solved"
     assert payload["reached_state"] == parse_p_data(ONE_CROSSING).to_list() == payload["plan"][-1]["state"]
     assert payload["sim_calls"] == sum(payload["sim_calls_by_source"].values())
+
+
+def test_run_search_reuses_the_workers_and_model_it_is_given_and_leaves_them_running(tmp_path: Path) -> None:
+    """Issue 64's replans: searches in a row given one SearchResources start the workers and load the
+    model once; run_search leaves them running (the owner closes them), and starts its own without."""
+    from twisted.planner import SearchProgress, SearchRequest, SearchResources, run_search
+
+    options = {"planner": "twisted", "seed": 0}
+    request = SearchRequest(goal=ONE_CROSSING, options=options, workers=1, timeout_s=600, timed_setup=False)
+    pools, samplers = [], []
+    with open_store(_db(tmp_path)) as store, SearchResources() as resources:
+        for seed in (0, 1):
+            progress = SearchProgress()
+            asked = dataclasses.replace(request, options={**options, "seed": seed})
+            assert run_search(store, asked, progress=progress, resources=resources).solved
+            assert progress.search is not None
+            pools.append(progress.search.pool)
+            samplers.append(progress.search.sampler)
+        # the second search ran on the first one's workers: they were left running
+        assert pools[0] is pools[1] is resources.pool(1, 1.0) and samplers[0] is samplers[1]
+        alone = SearchProgress()
+        assert run_search(store, request, progress=alone).solved and alone.search is not None
+        assert alone.search.pool is not pools[0]

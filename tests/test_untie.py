@@ -102,7 +102,7 @@ def test_untie_from_a_3_crossing_end_is_found_and_replays(tied_db: Path, tmp_pat
     assert "reaches the goal []" in replayed.output
     # the run it untied was not changed, and an unsolved one has no end to start from
     again = runner.invoke(app, ["--db", url, "untie", "1", "--resume"])
-    assert again.exit_code == 2 and "already solved" in again.output
+    assert again.exit_code == 2 and "is not an untie run" in again.output
 
 
 def test_an_interrupted_untie_resumes_where_it_stopped(tied_db: Path, tmp_path: Path) -> None:

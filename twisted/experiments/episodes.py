@@ -15,11 +15,10 @@ stopped by Ctrl-C continues from its last stored observation (:func:`resume_stat
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -95,8 +94,9 @@ class Replan:
 class ModelPlanner:
     """Plans in the planner's model from observed link points (what the world shows, nothing else).
 
-    ``search`` is the one call that runs a search (``twisted.planner.start_search`` + ``run``): the lead
-    can swap it for the library's ``run_search`` without touching the episode."""
+    Each search is the library's :func:`twisted.planner.run_search` (one :class:`SearchRequest`: the goal,
+    the start, the options with the replan's seed); the simulator workers and the model are started once
+    for all of them (:class:`twisted.planner.SearchResources`), until :meth:`close`."""
 
     def __init__(
         self,
@@ -108,45 +108,33 @@ class ModelPlanner:
         episode_run_id: int | None = None,
         stop: StopSignals | None = None,
     ) -> None:
+        from twisted.planner import SearchResources
+
         self.store, self.goal, self.options, self.model_id = store, goal, options, model_id
         self.workers, self.episode_run_id, self.stop = workers, episode_run_id, stop
-        self._resources = contextlib.ExitStack()
-        self._pool: Any = None
-        self._sampler: Any = None
+        self._resources = SearchResources()
         self._fit: Any = None
 
     def close(self) -> None:
         self._resources.close()
 
-    def _parts(self) -> tuple[Any, Any]:
-        if self._pool is None:
-            from twisted.planner import curve_sampler
-            from twisted.sim.pool import SimPool
-
-            self._sampler, _ = curve_sampler(self.store, self.options.planner, self.model_id)
-            self._pool = self._resources.enter_context(SimPool(self.workers))
-        return self._pool, self._sampler
-
     def search(self, start_configuration_id: int | None, seed: int, timeout_s: float) -> tuple[int, bool]:
         """One search of the goal from a stored configuration (None: the straight rope); (run id, solved)."""
-        from twisted.planner import start_search
+        from twisted.planner import SearchRequest, run_search
 
-        pool, sampler = self._parts()
-        options = replace(self.options, seed=seed)
-        extra = {"model_id": self.model_id, "episode": self.episode_run_id}
-        search = start_search(
-            self.store,
-            self.goal,
-            options,
-            pool,
-            sampler,
-            start_configuration_id,
-            stop=self.stop,
-            extra_parameters=extra,
+        request = SearchRequest(
+            goal=self.goal.spec,
+            options={**self.options.to_dict(), "seed": seed},
+            start_config=start_configuration_id,
+            model_id=self.model_id,
+            workers=self.workers,
+            timeout_s=timeout_s,
+            parameters={"episode": self.episode_run_id},
+            timed_setup=False,  # the replan's wall time (planning_s) counts it; a signal stops the search
         )
-        result = search.run(timeout_s=timeout_s)
-        assert search.run_id is not None  # a started search has its run
-        return int(search.run_id), bool(result.solved)
+        result = run_search(self.store, request, self.stop, resources=self._resources)
+        assert result.run_id is not None  # a started search has its run
+        return int(result.run_id), bool(result.solved)
 
     def replan(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
         """Fit the model's chain to observed ``points``, let it rest in the model, store it as a

@@ -43,6 +43,7 @@ __all__ = [
     "RunChoice",
     "SearchProgress",
     "SearchRequest",
+    "SearchResources",
     "SetupStopped",
     "check_request",
     "choose_run",
@@ -144,8 +145,16 @@ def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
 
 
 def stored_options(parameters: Mapping[str, Any], run_id: int | None = None) -> PlannerOptions:
-    """The options a run stored (:meth:`PlannerOptions.from_dict`); PlanInputError when it used an
-    option that was removed, so that it cannot be continued with other behaviour."""
+    """The options a run stored (:meth:`PlannerOptions.from_dict`), each checked by its declaration as
+    the command line's value is (StoredValueError naming the field, :mod:`twisted.store.boundary`), with
+    what a both-ways search stored (:data:`twisted.planner.untie.STORED`); PlanInputError when it used
+    an option that was removed, so that it cannot be continued with other behaviour."""
+    from twisted.planner.options import specs
+    from twisted.planner.untie import STORED
+    from twisted.store.boundary import check_declared
+
+    row = "?" if run_id is None else run_id
+    check_declared(parameters, (*specs(), *STORED), "runs", row, "parameters")
     try:
         return PlannerOptions.from_dict(parameters)
     except ValueError as exc:
@@ -177,15 +186,17 @@ def search_parts(
     return default_parts(options, goal, sampler, goal_test, **variant)
 
 
-def planner_options(given: Mapping[str, Any], stored: Mapping[str, Any] | None = None) -> PlannerOptions:
+def planner_options(
+    given: Mapping[str, Any], stored: Mapping[str, Any] | None = None, run_id: int | None = None
+) -> PlannerOptions:
     """The options of a search from those asked for (a value of None: not given, the default).
 
-    For a resumed run ``stored`` (its ``runs.parameters``) holds, and every option given must agree
-    with it. Raises :class:`PlanInputError` naming the options that clash or are out of range.
+    For a resumed run ``stored`` (run ``run_id``'s ``runs.parameters``) holds, and every option given must
+    agree with it. Raises :class:`PlanInputError` naming the options that clash or are out of range.
     """
     asked = {name: value for name, value in given.items() if value is not None}
     if stored is not None:
-        kept = stored_options(stored).to_dict()
+        kept = stored_options(stored, run_id).to_dict()
         clash = [f"--{n.replace('_', '-')} {v} (run has {kept[n]})" for n, v in asked.items() if kept[n] != v]
         if clash:
             message = f"a resumed run keeps its own search options; drop or fix: {', '.join(clash)}"
@@ -267,7 +278,8 @@ def choose_run(
     if model_id is not None and parameters.get("model_id") not in (None, model_id):
         used = parameters.get("model_id")
         raise PlanInputError(f"--model {model_id}: run {run_id} was searched with model {used}")
-    return RunChoice(run_id, planner_options(given, stored=parameters), parameters.get("model_id", model_id))
+    options = planner_options(given, stored=parameters, run_id=run_id)
+    return RunChoice(run_id, options, parameters.get("model_id", model_id))
 
 
 class _Logged:
@@ -343,7 +355,12 @@ def start_search(
     ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
     when adding moves alone cannot reach the goal from the start.
     """
-    from twisted.planner.untie import DEFAULT_REMOVAL_CURVES, both_ways_needed, run_end
+    from twisted.planner.untie import (
+        DEFAULT_REMOVAL_CURVES,
+        accepted_configuration,
+        both_ways_needed,
+        run_end,
+    )
     from twisted.store.search import SearchRun
 
     options.validate()
@@ -368,6 +385,7 @@ def start_search(
                 message = f"configuration {start_configuration_id} is not in this database"
                 raise PlanInputError(message) from None
             q, points = config.q_array(), config.points_array()
+        accepted_configuration(q, points, "configurations", start_configuration_id)
         root = _root(q, points, top(points))
     if root.p_data in goal:
         raise PlanInputError(f"the initial configuration is already in the goal state {root.p_data.key}")
@@ -670,6 +688,50 @@ class SetupStopped(Exception):
         self.phase, self.spent_s, self.timed_out = phase, spent_s, timed_out
 
 
+class SearchResources:
+    """What :func:`run_search` starts for a search (the simulator workers, the curve sampler with its
+    model), kept open for the next search of a caller that runs many in a row (the world's replans,
+    :mod:`twisted.experiments.episodes`): given to ``run_search(..., resources=)``, they are made on first
+    use and reused while the workers and the friction, resp. the planner kind and model asked for, are the
+    same. ``close()`` (or the end of a ``with`` block) stops the workers."""
+
+    def __init__(self) -> None:
+        import contextlib
+
+        self._stack = contextlib.ExitStack()
+        self._pools: dict[tuple[int, float], Pool] = {}
+        self._samplers: dict[tuple[str, int | None], tuple[CurveSampler | None, int | None]] = {}
+
+    def pool(self, workers: int, friction_scale: float) -> Pool:
+        """``workers`` simulator workers of the rope at ``friction_scale``, started once."""
+        from twisted.sim.pool import SimPool
+
+        key = (workers, friction_scale)
+        if key not in self._pools:
+            self._pools[key] = self._stack.enter_context(SimPool(workers, friction_scale))
+        return self._pools[key]
+
+    def sampler(
+        self, store: Any, planner: str, model_id: int | None
+    ) -> tuple[CurveSampler | None, int | None]:
+        """:func:`curve_sampler` of ``planner`` and ``model_id``, loaded once."""
+        key = (planner, model_id)
+        if key not in self._samplers:
+            self._samplers[key] = curve_sampler(store, planner, model_id)
+        return self._samplers[key]
+
+    def close(self) -> None:
+        self._stack.close()
+        self._pools.clear()
+        self._samplers.clear()
+
+    def __enter__(self) -> SearchResources:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 StoreOpener = Callable[..., Any]
 
 
@@ -688,9 +750,12 @@ def run_search(
     request: SearchRequest,
     stop: StopSignals | None = None,
     progress: SearchProgress | None = None,
+    resources: SearchResources | None = None,
 ) -> SearchResult:
     """Run the search ``request`` asks for, from the set-up to the stored end; every caller's one call
-    (``twisted plan``, ``twisted untie``, an evaluation's tasks, ``twisted improve``, the benches).
+    (``twisted plan``, ``twisted untie``, an evaluation's tasks, ``twisted improve``, the benches, the
+    world's replans). ``resources``: workers and model kept from an earlier search (else started here
+    and stopped at the end).
 
     The set-up: check the request, make the goal (a knot's states: read from the store when it kept
     them, else enumerated and kept), choose a new run or the run to continue (:func:`choose_run`: a run
@@ -718,13 +783,16 @@ def run_search(
         phase[0] = what
         progress.phase(what, time.perf_counter() - started)
 
-    with contextlib.ExitStack() as resources:
+    with contextlib.ExitStack() as started_here:
         timed = stop.setup(request.timeout_s) if request.timed_setup else contextlib.nullcontext()
         try:
             with timed:
-                opened, goal, choice, sampler, model_id = _set_up(store, request, stop, step)
+                opened, goal, choice, sampler, model_id = _set_up(store, request, stop, step, resources)
                 step(f"starting {request.workers} simulator worker{'s' if request.workers > 1 else ''}")
-                pool = resources.enter_context(SimPool(request.workers, request.friction_scale))
+                if resources is not None:
+                    pool = resources.pool(request.workers, request.friction_scale)
+                else:
+                    pool = started_here.enter_context(SimPool(request.workers, request.friction_scale))
         except StopRequested:
             spent_s = time.perf_counter() - started
             raise SetupStopped(phase[0], spent_s, stop.signum is None and stop.timed_out) from None
@@ -746,7 +814,11 @@ def run_search(
 
 
 def _set_up(
-    store: Any, request: SearchRequest, stop: StopSignals, step: Callable[[str], None]
+    store: Any,
+    request: SearchRequest,
+    stop: StopSignals,
+    step: Callable[[str], None],
+    resources: SearchResources | None = None,
 ) -> tuple[Any, Goal | None, RunChoice, CurveSampler | None, int | None]:
     """The goal, the open store, the run chosen and the model of :func:`run_search`. Enumerating a knot's
     states stops at once at a signal or the deadline; the checks in between (database, run, model)
@@ -781,7 +853,8 @@ def _set_up(
         )
         step("loading the model")
         try:
-            sampler, used_model_id = curve_sampler(opened, choice.options.planner, choice.model_id)
+            load = resources.sampler if resources is not None else curve_sampler
+            sampler, used_model_id = load(opened, choice.options.planner, choice.model_id)
         except PlanInputError as exc:
             given = f"--model {request.model_id}: " if request.model_id is not None else ""
             raise PlanInputError(f"{given}{exc}") from None
