@@ -37,7 +37,7 @@ import mujoco
 import numpy as np
 
 from twisted.sim import Curve, RopeSim, sample_curve
-from twisted.sim.rope import DEFAULT_TIMESTEP_S
+from twisted.sim.simulator import DEFAULT_TIMESTEP_S
 
 
 def reached_configurations(sim: RopeSim, rng: np.random.Generator, n: int) -> list[np.ndarray]:

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from twisted.sim import SimPool, sample_curve
-from twisted.sim.rope import RopeSim
+from twisted.sim.simulator import RopeSim
 
 REFERENCE = {0: 0.11, 1: 0.07, 2: 0.03}
 MAX_PER_COUNT = 5000  # reached configurations kept per crossing count (reservoir)

@@ -54,7 +54,7 @@ from lib.steps import choose, move_class, pairs_from, pool_map, segment_link
 from twisted.proposals import cross_move_curve, segment_bounds
 from twisted.rope import N_LINKS
 from twisted.sim import Curve, RopeSim
-from twisted.sim.rope import Pin
+from twisted.sim.simulator import Pin
 from twisted.topology import top
 
 FAMILIES = ("one-hand", "random-pin", "near-pin", "scripted-pin", "place-hold", "both-carry")

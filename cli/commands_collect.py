@@ -280,7 +280,7 @@ def db_command(
     import twisted.store
     from twisted.rope import ROPE
     from twisted.store import Base, head_revisions
-    from twisted.store.rope import ROPE_ROW_ID, StoredRope
+    from twisted.store.rope_profile import ROPE_ROW_ID, StoredRope
 
     for module in pkgutil.iter_modules(twisted.store.__path__):
         importlib.import_module(f"twisted.store.{module.name}")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twisted.sim import N_LINKS, Curve, RopeSim, simulate
-from twisted.sim.rope import PIN_SLIP_M, Pin
+from twisted.sim.simulator import PIN_SLIP_M, Pin
 
 # on the straight rope: link 13 carried around link 8, counter-clockwise, and over the rope beside it (its
 # neighbours 12, -0.1, -0.05 and -0.1 make the same curl)

@@ -115,7 +115,7 @@ def test_parse_rope_says_which_value_is_wrong_and_why(value: str, message: str) 
 
 
 def test_the_longest_rope_allowed_fits_the_workspace() -> None:
-    from twisted.sim.rope import CURVE_HIGH, WORKSPACE_RADIUS_M
+    from twisted.sim.simulator import CURVE_HIGH, WORKSPACE_RADIUS_M
 
     # half the straight rope plus the longest curve displacement stays inside the workspace
     assert MAX_ROPE_LENGTH_M / 2 + float(CURVE_HIGH[2]) <= WORKSPACE_RADIUS_M + 1e-9

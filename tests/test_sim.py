@@ -19,7 +19,7 @@ from twisted.sim import (
     sample_curve,
     simulate,
 )
-from twisted.sim.rope import LINK_RADIUS_M, MIN_LIFT_M, RELEASE_HEIGHT_M
+from twisted.sim.simulator import LINK_RADIUS_M, MIN_LIFT_M, RELEASE_HEIGHT_M
 from twisted.topology import EMPTY, parse_p_data
 
 # Two hand-designed curves: pull the middle link sideways (a V with both arms ending near y=0),

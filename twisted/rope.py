@@ -97,7 +97,7 @@ DEFAULT_ROPE = RopeProfile(n_links=21, link_spacing_m=DEFAULT_SPACING_M)  # the 
 # - At least 0.025 m apart: closer, neighbours overlap by more than half a capsule and the joint
 #   limits (110 degrees) no longer keep a link from folding onto its neighbour's body.
 # - At most 1.4 m long (and so at most 56 links): the simulator rejects a rope that leaves the
-#   1.2 m workspace radius (twisted.sim.rope.WORKSPACE_RADIUS_M) and a curve moves a link up to
+#   1.2 m workspace radius (twisted.sim.simulator.WORKSPACE_RADIUS_M) and a curve moves a link up to
 #   0.5 m: half the straight rope (0.7 m) plus 0.5 m is the workspace's edge.
 MIN_LINKS = 11
 MAX_LINKS = 56

@@ -37,7 +37,7 @@ import numpy.typing as npt
 from twisted.knots import RopeKnot, identify
 from twisted.rope import ROPE_LENGTH_M
 from twisted.sim.mjcf import LINK_RADIUS_M
-from twisted.sim.rope import WORKSPACE_RADIUS_M, RopeSim, minimum_jerk
+from twisted.sim.simulator import WORKSPACE_RADIUS_M, RopeSim, minimum_jerk
 from twisted.topology import PData, PDataError, top
 
 FloatArray = npt.NDArray[np.float64]

@@ -1,4 +1,4 @@
-"""The rope of the database's data: rope_profile (twisted/store/rope.py), its own branch off 0001.
+"""The rope of the database's data: rope_profile (twisted/store/rope_profile.py), its own branch off 0001.
 
 One row: the links and their spacing of the rope every configuration, plan and model in the database
 was made on (``TWISTED_ROPE``, docs/DESIGN.md section 2). ``open_store`` records the process's rope

@@ -58,7 +58,7 @@ Modules:
 * :mod:`twisted.knots.knotinfo`: KnotInfo's prime knots up to 7 crossings (PD codes, polynomials).
 * :mod:`twisted.knots.catalogue`: :class:`KnotType`, :func:`invariants` (a diagram named from the
   table), the knot table with its crossing numbers and mirrors, and the names a user may type.
-* :mod:`twisted.knots.rope`: what a rope ties (:class:`RopeKnot`, :func:`identify`,
+* :mod:`twisted.knots.identify_rope`: what a rope ties (:class:`RopeKnot`, :func:`identify`,
   :func:`identify_points`).
 * :mod:`twisted.knots.states`: the states that tie a named knot (:func:`states_tying`), cut from its
   KnotInfo diagram at its crossing number (:func:`minimal_states`).
@@ -88,9 +88,9 @@ from twisted.knots.gauss import (
     gauss_code_from_polygon,
     simplify,
 )
+from twisted.knots.identify_rope import KNOTOID, RopeKnot, identify, identify_points, knot_type_name
 from twisted.knots.knotinfo import KNOTINFO, MAX_TABLE_CROSSINGS, KnotInfoKnot
 from twisted.knots.polynomials import alexander_polynomial, jones_polynomial, kauffman_bracket
-from twisted.knots.rope import KNOTOID, RopeKnot, identify, identify_points, knot_type_name
 from twisted.knots.states import (
     MAX_BUILT_CROSSINGS,
     MAX_ENUMERATED_CROSSINGS,

@@ -14,8 +14,8 @@ from functools import lru_cache
 
 from twisted.knots.catalogue import CATALOGUE, crossing_number, knotinfo_name, resolve_knot
 from twisted.knots.gauss import GaussCode, gauss_code_from_pd
+from twisted.knots.identify_rope import identify
 from twisted.knots.knotinfo import KNOTINFO, MAX_TABLE_CROSSINGS
-from twisted.knots.rope import identify
 from twisted.topology import EMPTY, PData, PDataError
 
 __all__ = [

@@ -17,7 +17,7 @@ from types import TracebackType
 import numpy as np
 import numpy.typing as npt
 
-from twisted.sim.rope import Curve, RopeSim
+from twisted.sim.simulator import Curve, RopeSim
 from twisted.topology import PData
 
 Job = tuple[npt.ArrayLike, Curve]

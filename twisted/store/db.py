@@ -585,7 +585,7 @@ def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
 
     from twisted.rope import ROPE
     from twisted.store.models import utcnow
-    from twisted.store.rope import ROPE_ROW_ID, StoredRope
+    from twisted.store.rope_profile import ROPE_ROW_ID, StoredRope
 
     with engine.connect() as conn:
         stored = _stored_rope(conn)

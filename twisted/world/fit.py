@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from twisted.rope import N_LINKS, N_POINTS
 from twisted.sim.mjcf import MIDDLE_LINK, RopeParams, joint_names
-from twisted.sim.rope import RopeSim
+from twisted.sim.simulator import RopeSim
 from twisted.topology import PData, top
 
 FloatArray = npt.NDArray[np.float64]

@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-from twisted.sim.rope import Curve
+from twisted.sim.simulator import Curve
 
 FloatArray = npt.NDArray[np.float64]
 

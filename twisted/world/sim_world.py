@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from twisted.rope import N_LINKS
 from twisted.sim.mjcf import RopeParams
-from twisted.sim.rope import Curve, RopeSim
+from twisted.sim.simulator import Curve, RopeSim
 from twisted.tighten import cinch, tighten
 from twisted.world.levels import Level
 from twisted.world.protocol import FloatArray, Observation, PullVerdict
