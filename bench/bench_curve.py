@@ -61,7 +61,7 @@ def tree_edges(
 
     from twisted.store import blob_to_array, open_store
     from twisted.store.experiments import EvalResult
-    from twisted.store.search import SearchNode
+    from twisted.store.search_tree import SearchNode
 
     parent = aliased(SearchNode)
     query = (

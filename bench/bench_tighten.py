@@ -31,7 +31,7 @@ def _rows(url: str) -> list[tuple[str, bytes, str]]:
     from sqlalchemy import select
 
     from twisted.store import Configuration, TopologicalState, open_store
-    from twisted.store.search import SearchNode
+    from twisted.store.search_tree import SearchNode
 
     out: list[tuple[str, bytes, str]] = []
     with open_store(url) as store, store.session() as session:

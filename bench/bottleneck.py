@@ -35,7 +35,7 @@ from twisted.proposals import segment_bounds
 from twisted.rope import N_LINKS
 from twisted.store import open_store
 from twisted.store.experiments import Problem, ProblemSet
-from twisted.store.search import SearchRunRow, load_run
+from twisted.store.search_tree import SearchRunRow, load_run
 from twisted.topology import PData, parse_p_data
 
 

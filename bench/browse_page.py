@@ -61,7 +61,7 @@ def build_store(path: Path, nodes: int, seed: int) -> int:
     from twisted.planner import Checkpoint, Node
     from twisted.sim import Curve
     from twisted.store import open_store
-    from twisted.store.search import SearchRun
+    from twisted.store.search_tree import SearchRun
     from twisted.topology import parse_p_data, top
 
     rng = np.random.default_rng(seed)
@@ -107,7 +107,7 @@ def build_story_store(path: Path) -> None:
     """A small store with a story: a solved planner run (a one-crossing goal) with its pull test, and a
     collected trefoil."""
     from twisted.planner import PlannerOptions, start_search
-    from twisted.planner.session import replay
+    from twisted.planner.runs import replay
     from twisted.sim import SimPool
     from twisted.store import open_store
     from twisted.store.queries import add_configuration, start_run

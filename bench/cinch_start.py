@@ -53,7 +53,7 @@ def main() -> None:
     from twisted.knots import identify
     from twisted.store import open_store
     from twisted.store.queries import add_configuration
-    from twisted.store.search import solved_run
+    from twisted.store.search_tree import solved_run
     from twisted.tighten import cinch, tightening_sim
     from twisted.topology import top
 

@@ -34,7 +34,7 @@ from lib.steps import add_run_selection, planner_curves, pool_map, step_groups
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
 from twisted.planner.options import PlannerOptions
-from twisted.planner.strategies import StepCurves
+from twisted.planner.parts import StepCurves
 from twisted.sim import RopeSim
 from twisted.sim.mjcf import LINK_HALF_LENGTH_M, link_name
 from twisted.store import open_store

@@ -27,7 +27,7 @@ from sqlalchemy import select
 from twisted.experiments.report import load_results
 from twisted.store import open_store
 from twisted.store.experiments import EvalResult, ProblemSet
-from twisted.store.search import SearchCheckpoint
+from twisted.store.search_tree import SearchCheckpoint
 
 
 def _add(into: dict[str, list[float]], table: dict[str, list[float]]) -> None:

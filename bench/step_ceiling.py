@@ -34,7 +34,7 @@ from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
 from twisted.moves import explains
 from twisted.planner.options import PlannerOptions
-from twisted.planner.strategies import StepCurves
+from twisted.planner.parts import StepCurves
 from twisted.planner.tree import Node
 from twisted.sim.pool import SimPool
 from twisted.store import open_store

@@ -30,7 +30,7 @@ from lib.steps import add_run_selection, move_class, stored_pairs
 
 from twisted.proposals import segment_bounds
 from twisted.store import open_store
-from twisted.store.search import SearchRunInfo, StoredNode
+from twisted.store.search_tree import SearchRunInfo, StoredNode
 from twisted.topology import PData
 
 # --by free: upper bounds (links) of the free-rope bins

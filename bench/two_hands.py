@@ -286,7 +286,7 @@ def main() -> None:
     from twisted.model.registry import load_model
     from twisted.model.sampler import ModelCurves
     from twisted.planner.options import PlannerOptions
-    from twisted.planner.strategies import StepCurves
+    from twisted.planner.parts import StepCurves
     from twisted.store import open_store
 
     torch.set_num_threads(1)

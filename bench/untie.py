@@ -37,9 +37,9 @@ from sqlalchemy import select
 from twisted.goals import knot_goal, state_goal
 from twisted.moves import enumerate_states
 from twisted.planner import PlannerOptions, SearchProgress, SearchRequest, run_search
-from twisted.planner.untie import REMOVAL_CURVES
+from twisted.planner.both_ways import REMOVAL_CURVES
 from twisted.store import open_store
-from twisted.store.search import SearchRunRow, load_run
+from twisted.store.search_tree import SearchRunRow, load_run
 from twisted.topology import EMPTY
 
 

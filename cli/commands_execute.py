@@ -232,7 +232,7 @@ def _stored_plan(store: Any, run_id: int) -> tuple[Any, Any, Any, Any]:
     """The plan of solved run ``run_id``, its goal, options and model (exit 2, nothing written, otherwise)."""
     from twisted.experiments.episodes import plan_of_run
     from twisted.planner import PlanInputError, stored_options
-    from twisted.store.search import load_run
+    from twisted.store.search_tree import load_run
 
     try:
         plan = plan_of_run(store, run_id)
@@ -322,7 +322,7 @@ def tie_command(
     from twisted.experiments.episodes import ModelPlanner
     from twisted.experiments.robustness import model_plan
     from twisted.planner import PlanInputError
-    from twisted.planner.untie import make_any_goal
+    from twisted.planner.both_ways import make_any_goal
     from twisted.runtime import StopSignals
 
     level, settings = world.check()
@@ -379,7 +379,7 @@ def robustness_command(
     `twisted report` plots the success against the level. `--world` is not taken: use --levels."""
     from twisted.experiments.robustness import robustness_markdown, robustness_table, run_robustness
     from twisted.planner import PlanInputError
-    from twisted.planner.untie import make_any_goal
+    from twisted.planner.both_ways import make_any_goal
     from twisted.runtime import StopSignals
 
     chosen = [_level(name.strip()) for name in levels.split(",")]

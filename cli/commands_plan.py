@@ -31,7 +31,7 @@ from cli.app import (
     unwritable,
 )
 from cli.options import json_option, print_json, with_planner_options
-from twisted.planner.session import SearchProgress, SearchRequest
+from twisted.planner.runs import SearchProgress, SearchRequest
 from twisted.planner.tree import curve_row
 
 # the panels of `plan --help` (the planner's own options: cli.options.PLANNER_PANEL; global ones: cli.app)
@@ -258,7 +258,7 @@ def check_search(request: SearchRequest) -> None:
 
 
 def run_shown(ctx: typer.Context, request: SearchRequest, as_json: bool) -> tuple[Any, int]:
-    """:func:`twisted.planner.session.run_search` with a progress bar (none with --json); the result and
+    """:func:`twisted.planner.runs.run_search` with a progress bar (none with --json); the result and
     the exit code of a stop. A bad input exits 2; a set-up stopped by --timeout 3, by Ctrl-C / SIGTERM
     130 / 143 (nothing searched)."""
     from twisted.planner import PlanInputError, SetupStopped, run_search

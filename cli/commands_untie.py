@@ -1,7 +1,7 @@
 """`twisted untie`: straighten the rope a stored run ended with (plan to the straight rope ``[]``).
 
 The search is `twisted plan --from-run RUN_ID --goal '[]'`: Algorithm 1 with moves that remove
-crossings (twisted.planner.untie); its tree, checkpoints and resume are a plan run's. Exit codes as
+crossings (twisted.planner.both_ways); its tree, checkpoints and resume are a plan run's. Exit codes as
 `twisted plan`: 0 straightened, 2 bad input (unknown or unsolved run, ...), 3 not reached in time,
 130 / 143 interrupted after saving a checkpoint (continue with `twisted untie --resume UNTIE_RUN_ID`).
 """
@@ -36,7 +36,7 @@ from cli.commands_plan import (
     run_shown,
 )
 from cli.options import PLANNER_PANEL, json_option
-from twisted.planner.session import SearchRequest
+from twisted.planner.runs import SearchRequest
 
 RunId = Annotated[
     int,
@@ -103,7 +103,7 @@ def untie_command(
 def _check_untie_run(ctx: typer.Context, run_id: int) -> None:
     """``--resume RUN_ID``: exit 2 unless the run is an untie run (a tying search is `plan --resume`'s)."""
     from twisted.planner import PlanInputError
-    from twisted.planner.untie import check_untie_run
+    from twisted.planner.both_ways import check_untie_run
 
     with open_db(ctx, readonly=True, needed_by=f"--resume {run_id}") as store:
         try:

@@ -147,7 +147,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, int]:
     trefoil, and a run that starts from the trefoil (`_untie_run`)."""
     pytest.importorskip("datasette")
     from twisted.planner import PlannerOptions, start_search
-    from twisted.planner.session import replay
+    from twisted.planner.runs import replay
     from twisted.sim import SimPool
 
     path = tmp_path_factory.mktemp("browse") / "store.db"
@@ -171,7 +171,7 @@ def _untie_run(opened: object, from_run: int) -> int:
     from twisted.goals import state_goal
     from twisted.planner import Checkpoint, Node
     from twisted.sim import Curve
-    from twisted.store.search import SearchRun
+    from twisted.store.search_tree import SearchRun
 
     trefoil, straight = _trefoil_rope(), np.stack([np.arange(22) * 0.04, np.zeros(22), np.zeros(22)], axis=1)
 
@@ -270,7 +270,7 @@ def test_the_tree_query_draws_every_node(server, store) -> None:
     base, _, _ = server
     path, plan_id, _ = store
     with open_store(f"sqlite:///{path}", readonly=True) as opened:
-        from twisted.store.search import load_run, solution_path
+        from twisted.store.search_tree import load_run, solution_path
 
         info = load_run(opened, plan_id)
         assert info is not None
@@ -518,7 +518,7 @@ def test_a_run_page_tells_the_story_plan_first(server, store) -> None:
         assert fact in html, fact
     assert f'<img src="/-/twisted/runs/{plan_id}/plan.png"' in html
     with open_store(f"sqlite:///{path}", readonly=True) as opened:
-        from twisted.store.search import solution_path
+        from twisted.store.search_tree import solution_path
 
         plan = solution_path(opened, plan_id)
     marks = re.findall(r"<tr><td>(plan)?</td><td>(\d+)</td>", html)

@@ -22,7 +22,7 @@ from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
 from twisted.store.models import Run
-from twisted.store.search import load_run
+from twisted.store.search_tree import load_run
 from twisted.world import LEVELS, SimWorld, World
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'

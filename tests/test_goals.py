@@ -20,7 +20,7 @@ from twisted.store import open_store
 from twisted.store.experiments import EvalResult, load_problem_set
 from twisted.store.knots import knots_tied
 from twisted.store.plans import PlanQuery
-from twisted.store.search import SearchRunRow, find_resumable_run, load_run
+from twisted.store.search_tree import SearchRunRow, find_resumable_run, load_run
 from twisted.topology import EMPTY, parse_p_data
 
 runner = CliRunner()

@@ -166,13 +166,13 @@ def test_ctrl_c_while_plan_enumerates_the_goal_exits_130_and_starts_no_run(
 ) -> None:
     """Before: `setsid twisted plan --goal G --timeout 20 & sleep 1.2; kill -INT -- -$!` ran all 20 s
     (3 of 3); during `--knot 5_1` enumeration as well. Now: exit 130 at once, nothing searched."""
-    import twisted.planner.untie
+    import twisted.planner.both_ways
 
     def slow_goal(*args: Any, **kwargs: Any) -> Any:  # stands in for a long knot enumeration
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(30)
 
-    monkeypatch.setattr(twisted.planner.untie, "make_goal", slow_goal)  # what the set-up calls
+    monkeypatch.setattr(twisted.planner.both_ways, "make_goal", slow_goal)  # what the set-up calls
     url = f"sqlite:///{tmp_path / 'p.db'}"
     started = time.monotonic()
     code, out = _cli("--db", url, "plan", "--knot", "5_1", "--timeout", "20")
@@ -184,10 +184,10 @@ def test_ctrl_c_while_plan_enumerates_the_goal_exits_130_and_starts_no_run(
 def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Before: `plan --knot 5_1 --timeout 20` took 54 s, 33 s of them before the search. Now the set-up
     stops when --timeout runs out (exit 3), and a finished set-up is shown and counted."""
-    import twisted.planner.untie
+    import twisted.planner.both_ways
 
-    real_make_goal = twisted.planner.untie.make_goal
-    monkeypatch.setattr(twisted.planner.untie, "make_goal", lambda *a, **k: time.sleep(30))
+    real_make_goal = twisted.planner.both_ways.make_goal
+    monkeypatch.setattr(twisted.planner.both_ways, "make_goal", lambda *a, **k: time.sleep(30))
     url = f"sqlite:///{tmp_path / 'p.db'}"
     started = time.monotonic()
     code, out = _cli("--db", url, "plan", "--knot", "5_1", "--timeout", "0.5")
@@ -197,7 +197,7 @@ def test_the_setup_counts_toward_the_timeout(tmp_path: Path, monkeypatch: pytest
         time.sleep(0.6)
         return real_make_goal(*args, **kwargs)
 
-    monkeypatch.setattr(twisted.planner.untie, "make_goal", slow_goal)  # what the set-up calls
+    monkeypatch.setattr(twisted.planner.both_ways, "make_goal", slow_goal)  # what the set-up calls
     code, out = _cli(
         "--db",
         url,
@@ -369,7 +369,7 @@ def test_a_run_held_by_a_live_process_is_refused_and_a_dead_holder_is_taken_over
 
 def test_a_writer_that_lost_its_lease_stops_writing(plan_db: tuple[Path, str]) -> None:
     from twisted.planner import Checkpoint
-    from twisted.store.search import RunBusyError, SearchRun, take_lease
+    from twisted.store.search_tree import RunBusyError, SearchRun, take_lease
 
     _, url = plan_db
     with open_store(url) as store:

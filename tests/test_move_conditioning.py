@@ -46,7 +46,7 @@ from twisted.store import Configuration, open_store
 from twisted.store.experiments import EvalResult, Problem, ProblemRecord, save_problem_set, start_eval_run
 from twisted.store.models import array_to_blob
 from twisted.store.queries import get_or_create_state, start_run
-from twisted.store.search import SearchNode, SearchRunRow
+from twisted.store.search_tree import SearchNode, SearchRunRow
 from twisted.store.training import TrainingRun
 from twisted.topology import PData, parse_p_data, top
 

@@ -14,7 +14,7 @@ from typer.testing import CliRunner  # noqa: E402
 from cli.main import app  # noqa: E402
 from twisted.rl import SacConfig, train_sac  # noqa: E402
 from twisted.store import open_store  # noqa: E402
-from twisted.store.search import load_run  # noqa: E402
+from twisted.store.search_tree import load_run  # noqa: E402
 
 ONE = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
 runner = CliRunner()

@@ -28,8 +28,8 @@ from twisted.planner import (
     Node,
     PlannerOptions,
     RandomCurves,
+    Search,
     SearchTree,
-    Twisted,
     planner_options,
     replay,
     resume_search,
@@ -40,7 +40,7 @@ from twisted.runtime import StopSignals
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.models import Run
-from twisted.store.search import SearchCheckpoint, SearchNode, SearchRunRow, load_run
+from twisted.store.search_tree import SearchCheckpoint, SearchNode, SearchRunRow, load_run
 from twisted.topology import EMPTY, PData, parse_p_data
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
@@ -132,12 +132,12 @@ def test_a_search_logs_its_start_checkpoints_and_end(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     options = PlannerOptions(planner="random-low", seed=3, k=4, p_expand=0.5, k_expand=8)
-    caplog.set_level(logging.DEBUG, logger="twisted.planner.session")
+    caplog.set_level(logging.DEBUG, logger="twisted.planner.runs")
     with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
         search = start_search(store, check_goal(THREE_CROSSINGS), options, pool)
         search.run(max_iterations=2)
         resume_search(store, search.run_id, pool).run(max_iterations=3)  # type: ignore[arg-type]
-    lines = [r.getMessage() for r in caplog.records if r.name == "twisted.planner.session"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "twisted.planner.runs"]
     assert lines[0].startswith("run 1: new search from the straight rope for goal [[1,")
     assert "planner random-low, heuristic crs, model none, seed 3" in lines[0]
     assert any(line.startswith("run 1: checkpoint at iteration 2") for line in lines)
@@ -157,7 +157,7 @@ def test_a_resumed_run_keeps_its_options() -> None:
 # --- selection heuristics --------------------------------------------------------------------------------
 
 
-def _search_with_states(states: list[str], heuristic: str, goal: str, **options: Any) -> Twisted:
+def _search_with_states(states: list[str], heuristic: str, goal: str, **options: Any) -> Search:
     """A search whose tree holds one node per state (no simulation is needed to select)."""
     q, points, p0 = straight_rope()
     tree = SearchTree()
@@ -168,7 +168,7 @@ def _search_with_states(states: list[str], heuristic: str, goal: str, **options:
     # every node has the straight rope's points whatever its state: no room for a curl can be read
     options.setdefault("r1_room", 0.0)
     options = PlannerOptions(heuristic=heuristic, seed=7, **options)
-    return Twisted(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
+    return Search(g, tree, options, pool=None, high_level=lambda s: plans(s, g, 100))  # type: ignore[arg-type]
 
 
 STATES_0_1_2 = ["[]", ONE_CROSSING, '[[1,"O",4,"+"],[2,"O",3,"+"],[3,"U",2,"+"],[4,"U",1,"+"]]']
@@ -286,7 +286,7 @@ class _StopOnCall(RandomCurves):
 
     def __init__(self, stop: StopSignals, n: int) -> None:
         self.stop, self.n, self.calls = stop, n, 0
-        self.search: Twisted | None = None
+        self.search: Search | None = None
         self.stopped_in = 0  # the iteration the stop request came in
 
     def sample(self, *args: Any, **kwargs: Any) -> list[Any]:

@@ -340,7 +340,7 @@ def test_knots_identify_command() -> None:
 
 def _tree(session, run_id: int, states: list) -> None:
     """A planner tree: the root (seq 0, the run's start) and then one node per state, a chain."""
-    from twisted.store.search import SearchNode
+    from twisted.store.search_tree import SearchNode
 
     parent = None
     for seq, p in enumerate(states):

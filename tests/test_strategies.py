@@ -1,4 +1,4 @@
-"""The parts of Algorithm 1 (twisted.planner.strategies), each on its own, and the one declaration of the
+"""The parts of Algorithm 1 (twisted.planner.parts), each on its own, and the one declaration of the
 planner's options (twisted.planner.options).
 
 The parts are exercised on a small view of a search (a tree, the plans of its states, the statistics
@@ -32,7 +32,7 @@ from twisted.planner.options import (
     result_options,
     specs,
 )
-from twisted.planner.strategies import (
+from twisted.planner.parts import (
     R1_ROOM_FLOOR,
     AddingMoves,
     BothWays,
@@ -63,7 +63,7 @@ DRAWS = 4000
 
 @dataclass
 class View:
-    """What a part reads of a search (twisted.planner.strategies.SearchView)."""
+    """What a part reads of a search (twisted.planner.parts.SearchView)."""
 
     goal: Goal
     tree: SearchTree = field(default_factory=SearchTree)
@@ -495,7 +495,7 @@ def test_a_fixed_seed_search_with_model_curves_replays_on_the_same_machine() -> 
 
 
 def test_only_a_composite_knot_goal_cinches_and_only_ropes_tying_a_summand_at_its_crossing_number() -> None:
-    from twisted.planner.strategies import SummandCinch
+    from twisted.planner.parts import SummandCinch
 
     granny, overhand = knot_goal("granny"), knot_goal("overhand")
     assert default_parts(PlannerOptions(), granny).cinch is not None
@@ -512,7 +512,7 @@ def test_only_a_composite_knot_goal_cinches_and_only_ropes_tying_a_summand_at_it
 
 
 def test_steps_start_from_tight_ropes_and_a_summand_state_cinches_again_after_its_steps() -> None:
-    from twisted.planner.strategies import CINCH_STEPS, TIGHT_WEIGHT, SummandCinch
+    from twisted.planner.parts import CINCH_STEPS, TIGHT_WEIGHT, SummandCinch
     from twisted.planner.tree import CINCH
 
     granny = knot_goal("granny")

@@ -214,7 +214,7 @@ def test_a_knotoid_goal_names_no_knot_and_replay_tighten_exits_3(tmp_path: Path)
 
 def _final_configuration(db: str, run_id: int) -> tuple[np.ndarray, np.ndarray]:
     """The q and the link points of a solved run's goal node."""
-    from twisted.store.search import solved_run
+    from twisted.store.search_tree import solved_run
 
     with open_store(db) as store:
         end = solved_run(store, run_id)[1][-1]
@@ -255,7 +255,7 @@ def test_a_search_for_a_granny_cinches_the_overhand_it_starts_from_and_stores_th
     from sqlalchemy import select
 
     from twisted.store.queries import add_configuration
-    from twisted.store.search import SearchNode
+    from twisted.store.search_tree import SearchNode
 
     source_db, result = overhand_run
     q, points = _final_configuration(source_db, result["run_id"])
@@ -313,7 +313,7 @@ def test_a_search_for_a_granny_cinches_the_overhand_it_starts_from_and_stores_th
 def _checkpoint_stats(session: object, run_id: int) -> dict:
     from sqlalchemy import select
 
-    from twisted.store.search import SearchCheckpoint
+    from twisted.store.search_tree import SearchCheckpoint
 
     query = select(SearchCheckpoint.stats).where(SearchCheckpoint.run_id == run_id)
     return session.scalars(query).one()  # type: ignore[attr-defined]

@@ -319,7 +319,7 @@ def test_sac_state_round_trips_and_old_sb3_archives_load_without_their_pickles(
 
 def test_planner_checkpoint_and_nodes_hold_no_code(db: Path, tmp_path: Path) -> None:
     """A pickle planted in a planner checkpoint (JSON) or node (float64 BLOB) is data, never code."""
-    from twisted.store.search import SearchCheckpoint, SearchNode
+    from twisted.store.search_tree import SearchCheckpoint, SearchNode
 
     result = runner.invoke(
         app,

@@ -17,15 +17,15 @@ from cli.main import app
 from twisted.collect import CollectOptions, collect
 from twisted.goals import state_goal
 from twisted.moves import plans, plans_both_ways
-from twisted.planner import PlannerOptions, Twisted, curve_sampler, resume_search, start_search
-from twisted.planner.strategies import BothWays
+from twisted.planner import PlannerOptions, Search, curve_sampler, resume_search, start_search
+from twisted.planner.parts import BothWays
 from twisted.runtime import StopSignals
 from twisted.sim import Curve, RopeSim
 from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.models import Configuration, Run, Transition
 from twisted.store.plans import BOTH_WAYS_SUFFIX, PlanQuery, cached_plans
-from twisted.store.search import load_run
+from twisted.store.search_tree import load_run
 from twisted.topology import EMPTY, parse_p_data
 
 OVERHAND = parse_p_data(
@@ -121,7 +121,7 @@ def test_an_interrupted_untie_resumes_where_it_stopped(tied_db: Path, tmp_path: 
         assert done.solved and done.iterations >= 2
         stop = StopSignals()
 
-        def ctrl_c(search: Twisted) -> None:
+        def ctrl_c(search: Search) -> None:
             if search.iteration == 1:
                 stop.signum = signal.SIGINT
 

@@ -20,13 +20,13 @@ from sqlalchemy import select
 
 from twisted.moves import Move, explains
 from twisted.planner.options import PlannerOptions
-from twisted.planner.strategies import StepCurves
+from twisted.planner.parts import StepCurves
 from twisted.planner.tree import Node
 from twisted.proposals import segment_bounds
 from twisted.rope import N_LINKS
 from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
-from twisted.store.search import SearchRunInfo, StoredNode, load_run
+from twisted.store.search_tree import SearchRunInfo, StoredNode, load_run
 from twisted.topology import PData, parse_p_data
 
 PLANNER_K = PlannerOptions().k  # the curves of one of the planner's steps (its default K)

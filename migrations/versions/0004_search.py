@@ -1,4 +1,4 @@
-"""Planner search tree: search_runs, search_nodes, search_checkpoints (twisted/store/search.py).
+"""Planner search tree: search_runs, search_nodes, search_checkpoints (twisted/store/search_tree.py).
 
 Revision ID: 0004
 Revises: 0001

@@ -42,7 +42,7 @@ def check_rope(points: Any, where: str) -> None:
 def draw(store: Any, out: Path, kind: str, arg: str) -> None:
     """Draw one picture (``state`` KEY or ``plan`` RUN_ID) into ``out``; RenderError when it cannot be."""
     from twisted.render import RenderError, find_drawing, render_goal, render_run, render_tightened
-    from twisted.store.search import NoPlanError, solved_run
+    from twisted.store.search_tree import NoPlanError, solved_run
     from twisted.topology import PDataError, parse_p_data
 
     if kind == "state":

@@ -66,7 +66,7 @@ class Plan:
 
 def plan_of_run(store: Any, run_id: int) -> Plan:
     """The plan of a solved planner run (PlanInputError when there is none)."""
-    from twisted.store.search import NoPlanError, solved_run
+    from twisted.store.search_tree import NoPlanError, solved_run
 
     try:
         _, path = solved_run(store, run_id)

@@ -165,7 +165,7 @@ def _request(store: Any, task: EvalTask, resume_run_id: int | None) -> Any:
     import dataclasses
 
     from twisted.planner import PlannerOptions, SearchRequest
-    from twisted.store.search import load_run
+    from twisted.store.search_tree import load_run
 
     base = SearchRequest(
         workers=task.workers, friction_scale=task.friction_scale, timeout_s=task.timeout_s, timed_setup=False

@@ -46,7 +46,7 @@ class ResultRow:
 
 def load_results(session: Any, set_names: Sequence[str] | None = None) -> list[ResultRow]:
     """Finished results (solved or timed out), with their set, goal and the goal node's simulation."""
-    from twisted.store.search import SearchNode, SearchRunRow
+    from twisted.store.search_tree import SearchNode, SearchRunRow
 
     q = (
         select(EvalResult, ProblemSet.name, Problem.frequency, Problem.tag, SearchNode.sim_call)

@@ -166,9 +166,9 @@ def model_plan(
     goal and options reused, else a new search. (plan, goal, options, planning seconds spent here)."""
     from twisted.experiments.episodes import ModelPlanner, plan_of_run
     from twisted.planner import planner_options
-    from twisted.planner.untie import make_any_goal
+    from twisted.planner.both_ways import make_any_goal
     from twisted.store.models import Run
-    from twisted.store.search import SearchRunRow
+    from twisted.store.search_tree import SearchRunRow
 
     goal = make_any_goal(None, knot, None)
     options = planner_options({"tighten": True, "seed": seed})

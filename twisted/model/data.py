@@ -52,7 +52,7 @@ from twisted.sim import N_POINTS
 from twisted.store.db import Store
 from twisted.store.experiments import Problem, ProblemSet
 from twisted.store.models import Configuration, Run, TopologicalState, Transition, blob_to_array
-from twisted.store.search import SearchNode, SearchRunRow
+from twisted.store.search_tree import SearchNode, SearchRunRow
 from twisted.topology import PData, parse_p_data
 
 __all__ = [

@@ -39,7 +39,7 @@ from twisted.sim.pool import SimPool
 from twisted.store.db import Store
 from twisted.store.experiments import EvalResult, Problem, ProblemSet
 from twisted.store.models import Configuration, TopologicalState, Transition, blob_to_array
-from twisted.store.search import SearchNode
+from twisted.store.search_tree import SearchNode
 from twisted.topology import PData, parse_p_data
 
 __all__ = ["HeldOut", "StepResult", "held_out_transitions", "step_name", "success_at_k", "tree_steps"]

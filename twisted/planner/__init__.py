@@ -3,13 +3,13 @@
 - :mod:`twisted.planner.options`: ``PlannerOptions``, every option declared once (type, default, bounds,
   help, the commands that take it, the value runs had before it existed); ``PLANNERS``, ``HEURISTICS``.
 - :mod:`twisted.planner.tree`: the tree ``T`` (``Node``, ``SearchTree``).
-- :mod:`twisted.planner.strategies`: the parts a search is built from: state, plan and node selection,
+- :mod:`twisted.planner.parts`: the parts a search is built from: state, plan and node selection,
   curve proposers, goal tests, what enters the tree (adding moves or both ways) and the iteration
-  itself (Algorithm 1 or the low-level-only baseline) (``Parts``, ``default_parts``).
-- :mod:`twisted.planner.search`: Algorithm 1's loop. ``Twisted`` (the search), the protocols of what it
+  itself (Algorithm 1 or the low-level-only baseline) (``SearchParts``, ``default_parts``).
+- :mod:`twisted.planner.search`: Algorithm 1's loop. ``Search`` (the search), the protocols of what it
   composes (``Pool``, ``SearchRecorder``), its checkpoint and result. The stop signals it checks between
   steps are :class:`twisted.runtime.StopSignals`.
-- :mod:`twisted.planner.session`: searches from the store. ``run_search`` (one call from a
+- :mod:`twisted.planner.runs`: searches from the store. ``run_search`` (one call from a
   ``SearchRequest`` to a stored ``SearchResult``: what every caller uses); ``start_search``,
   ``resume_search``, ``replay``; ``choose_run`` (new run or resume, with the options of each);
   ``search_parts`` (the parts, with the pull test when asked for); ``curve_sampler`` (the inverse
@@ -20,8 +20,8 @@ the inverse model's sampler ``ModelCurves`` in :mod:`twisted.model.sampler`. See
 """
 
 from twisted.goals import PlanInputError
-from twisted.planner import search, session
+from twisted.planner import runs, search
+from twisted.planner.runs import *  # noqa: F403
 from twisted.planner.search import *  # noqa: F403
-from twisted.planner.session import *  # noqa: F403
 
-__all__ = ["PlanInputError", *search.__all__, *session.__all__]
+__all__ = ["PlanInputError", *search.__all__, *runs.__all__]

@@ -12,18 +12,18 @@ and a set of high-level plans ``P`` from every reached state to the goal. Each i
 
 until a node passes the goal test (``parts.goal_test``: a goal state, or a goal state whose rope
 passes the pull test) or the time runs out. The answer is the path of curves from the root of ``T``
-to that node. Each decision is a part (:mod:`twisted.planner.strategies`), the iteration itself
-(``parts.iteration``) and which results enter ``T`` (``parts.growth``) included; :class:`Twisted`
+to that node. Each decision is a part (:mod:`twisted.planner.parts`), the iteration itself
+(``parts.iteration``) and which results enter ``T`` (``parts.growth``) included; :class:`Search`
 keeps the tree, the plans, the statistics the parts read and the checkpoints. Where the parts differ
 from the paper: DESIGN 8.
 
 Baselines (``planner``) are parts too: ``twisted`` samples curves from the inverse model;
 ``random-low`` follows the same high-level plans with uniformly random curves (the paper's "low+high
-level"); ``low-level-only`` (:class:`~twisted.planner.strategies.LowLevelOnly`) applies random curves
+level"); ``low-level-only`` (:class:`~twisted.planner.parts.LowLevelOnly`) applies random curves
 to random nodes of ``T`` with no topological guidance beyond the goal test; ``sac`` follows the
 high-level plans like ``twisted`` with a SAC+HER policy (``twisted rl train``) in place of the inverse
 model, as in the paper's comparison. A search both ways (``twisted untie``) is the growth
-:class:`~twisted.planner.strategies.BothWays` with a high level that plans removing moves too.
+:class:`~twisted.planner.parts.BothWays` with a high level that plans removing moves too.
 
 The goal is a set of states (:class:`twisted.goals.Goal`): one P-data state, or every state that ties
 a named knot.
@@ -37,7 +37,7 @@ exactly where the checkpoint left it and never writes a node twice.
 
 This module knows nothing of the store, the model registry, the simulator or the pull test: what a
 search composes (its parts, a worker pool, the high level, a recorder) comes in through the
-protocols below; :mod:`twisted.planner.session` builds searches from the store.
+protocols below; :mod:`twisted.planner.runs` builds searches from the store.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ import numpy as np
 
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
-from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
+from twisted.planner.parts import BlindCurves, CurveSampler, RandomCurves, SearchParts, default_parts
 from twisted.planner.tree import CINCH, Node, SearchTree, curve_row, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
@@ -71,7 +71,7 @@ __all__ = [
     "SearchRecorder",
     "SearchResult",
     "SearchTree",
-    "Twisted",
+    "Search",
     "pair_key",
 ]
 
@@ -104,7 +104,7 @@ class Checkpoint:
 
 
 class SearchRecorder(Protocol):
-    """Persists nodes and checkpoints (implemented by :class:`twisted.store.search.SearchRun`)."""
+    """Persists nodes and checkpoints (implemented by :class:`twisted.store.search_tree.SearchRun`)."""
 
     def save(self, nodes: Sequence[Node], checkpoint: Checkpoint) -> None:
         """Write ``nodes`` (assigning ``db_id``) and ``checkpoint`` in one transaction."""
@@ -131,7 +131,7 @@ class SearchResult:
     goal: Goal | None = None
     tighten: bool = False  # the goal test was the pull test
     pull_tests: int = 0
-    setup_s: float = 0.0  # set-up before the search (twisted.planner.session.run_search), in elapsed_s
+    setup_s: float = 0.0  # set-up before the search (twisted.planner.runs.run_search), in elapsed_s
     model: dict[str, Any] = field(default_factory=dict)  # the inverse model sampled (model_id, model_samples)
 
     @property
@@ -194,7 +194,7 @@ class _Stop(Exception):
 # --- Algorithm 1 ----------------------------------------------------------------------------------------
 
 
-class Twisted:
+class Search:
     """One search for ``goal`` (Algorithm 1), resumable from a :class:`Checkpoint`."""
 
     def __init__(
@@ -210,11 +210,11 @@ class Twisted:
         run_id: int | None = None,
         stop: StopSignals | None = None,
         checkpoint_every_s: float = 2.0,
-        progress: Callable[[Twisted], None] | None = None,
-        parts: Parts | None = None,
+        progress: Callable[[Search], None] | None = None,
+        parts: SearchParts | None = None,
     ) -> None:
         """``parts``: what the search's decisions are (default: those ``options`` name, with ``sampler``
-        proposing the curves; :func:`twisted.planner.strategies.default_parts`)."""
+        proposing the curves; :func:`twisted.planner.parts.default_parts`)."""
         options.validate()
         if len(tree) == 0:
             raise ValueError("the tree needs its root (the initial configuration)")
@@ -401,7 +401,7 @@ class Twisted:
 
     def cinched(self, node: Node) -> Node:
         """The node a plan step starts from instead of ``node``: toward a composite knot, a loose node tying
-        a summand is cinched first (``parts.cinch``, :class:`~twisted.planner.strategies.SummandCinch`),
+        a summand is cinched first (``parts.cinch``, :class:`~twisted.planner.parts.SummandCinch`),
         and the cinched node takes its place when it is in the same state (else the step starts from
         ``node``). A loose node cinched before is never chosen again (``SummandCinch.candidates``)."""
         part = self.parts.cinch

@@ -94,7 +94,7 @@ def find_drawing(store: Any, p_data: PData) -> tuple[str, npt.NDArray[np.float64
         if row is not None:
             return f"configuration {row.id}", row.points_array()
         try:
-            from twisted.store.search import SearchNode
+            from twisted.store.search_tree import SearchNode
         except ImportError:  # the planner's tables are not part of this installation
             return None
         node = session.scalars(
@@ -127,7 +127,7 @@ def render_goal(store: Any | None, p_data: PData, out: str | Path) -> Rendered:
 
 def _solved_run(store: Any, run_id: int) -> tuple[Any, list[Any]]:
     """A planner run and the stored path of its plan; RenderError when there is none to draw."""
-    from twisted.store.search import NoPlanError, solved_run
+    from twisted.store.search_tree import NoPlanError, solved_run
 
     try:
         return solved_run(store, run_id)

@@ -192,7 +192,7 @@ def check_checkpoint(
         raise StoredValueError(table, row, "rng_state", str(exc)) from None
     generator_state = stored_object(state, table, row, "rng_state")
     try:
-        np.random.PCG64().state = cast(Any, generator_state)  # what Twisted restores: numpy checks it
+        np.random.PCG64().state = cast(Any, generator_state)  # what Search restores: numpy checks it
     except (ValueError, TypeError, KeyError, OverflowError) as exc:
         problem = f"not a PCG64 generator state ({shown(str(exc), 120)})"
         raise StoredValueError(table, row, "rng_state", problem) from None
@@ -236,7 +236,7 @@ def stored_curve(
 def check_configuration(q: np.ndarray, points: np.ndarray, n_points: int, table: str, row: Any) -> None:
     """A stored rope configuration: ``q`` a flat vector of finite floats, ``points`` ``n_points`` finite
     3-D points (the rope profile's). Whether the simulator takes ``q`` is the planner's check
-    (:func:`twisted.planner.untie.accepted_configuration`): the store knows no simulator."""
+    (:func:`twisted.planner.both_ways.accepted_configuration`): the store knows no simulator."""
     if q.ndim != 1 or q.size == 0 or not np.all(np.isfinite(q)):
         raise StoredValueError(table, row, "q", f"must be finite floats, got {_describe(q)}")
     if points.shape != (n_points, 3) or not np.all(np.isfinite(points)):

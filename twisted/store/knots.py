@@ -130,7 +130,7 @@ def configurations_per_state(session: Session, keys: Iterable[str]) -> dict[str,
     return _count_per_state(session, keys, Configuration, Configuration.id, Configuration.state_id)
 
 
-# search_nodes read by name (twisted.store.search imports this module): the planner trees' vertices
+# search_nodes read by name (twisted.store.search_tree imports this module): the planner trees' vertices
 _SEARCH_NODES = table(
     "search_nodes", column("id", Integer), column("state_id", Integer), column("seq", Integer)
 )

@@ -7,7 +7,7 @@ registry and the SAC policies). :func:`choose_run` is the decision ``twisted pla
 new run and a resumed one, with the checks that come with it. Every refusal raises
 :class:`twisted.goals.PlanInputError` with a message that says which input is wrong.
 
-Each search logs (``logging``, logger ``twisted.planner.session``) its start, each checkpoint
+Each search logs (``logging``, logger ``twisted.planner.runs``) its start, each checkpoint
 (DEBUG) and how it ended.
 """
 
@@ -22,17 +22,17 @@ from typing import Any
 import numpy as np
 
 from twisted.goals import Goal, PlanInputError, state_goal
+from twisted.planner.parts import PullTest, SearchParts, default_parts
 from twisted.planner.search import (
     Checkpoint,
     CurveSampler,
     Node,
     PlannerOptions,
     Pool,
+    Search,
     SearchResult,
     SearchTree,
-    Twisted,
 )
-from twisted.planner.strategies import Parts, PullTest, default_parts
 from twisted.planner.tree import CINCH
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
@@ -147,10 +147,10 @@ def _root(q: np.ndarray, points: np.ndarray, p_data: PData) -> Node:
 def stored_options(parameters: Mapping[str, Any], run_id: int | None = None) -> PlannerOptions:
     """The options a run stored (:meth:`PlannerOptions.from_dict`), each checked by its declaration as
     the command line's value is (StoredValueError naming the field, :mod:`twisted.store.boundary`), with
-    what a both-ways search stored (:data:`twisted.planner.untie.STORED`); PlanInputError when it used
+    what a both-ways search stored (:data:`twisted.planner.both_ways.STORED`); PlanInputError when it used
     an option that was removed, so that it cannot be continued with other behaviour."""
+    from twisted.planner.both_ways import STORED
     from twisted.planner.options import specs
-    from twisted.planner.untie import STORED
     from twisted.store.boundary import check_declared
 
     row = "?" if run_id is None else run_id
@@ -169,11 +169,11 @@ def search_parts(
     recorder: Any,
     parameters: Mapping[str, Any] | None = None,
     start: PData | None = None,
-) -> Parts:
-    """The parts of a search (:func:`twisted.planner.strategies.default_parts`); with ``tighten`` the goal
+) -> SearchParts:
+    """The parts of a search (:func:`twisted.planner.parts.default_parts`); with ``tighten`` the goal
     test is the pull test, each one stored with the run through ``recorder``; a run whose ``parameters``
-    ask for it searches both ways from ``start`` (:func:`twisted.planner.untie.both_ways_parts`)."""
-    from twisted.planner.untie import both_ways_parts
+    ask for it searches both ways from ``start`` (:func:`twisted.planner.both_ways.both_ways_parts`)."""
+    from twisted.planner.both_ways import both_ways_parts
 
     goal_test = None
     if options.tighten:
@@ -253,7 +253,7 @@ def choose_run(
     options = check_request(given, resume=resume, start_config=start_config)
     if options is not None:
         return RunChoice(None, options, model_id)
-    from twisted.store.search import find_resumable_run, load_run
+    from twisted.store.search_tree import find_resumable_run, load_run
 
     if run_id is None:
         run_id = find_resumable_run(store, goal)
@@ -342,26 +342,26 @@ def start_search(
     sampler: CurveSampler | None = None,
     start_configuration_id: int | None = None,
     stop: StopSignals | None = None,
-    progress: Callable[[Twisted], None] | None = None,
+    progress: Callable[[Search], None] | None = None,
     extra_parameters: dict[str, Any] | None = None,
     from_run: int | None = None,
     removal_curves: str | None = None,
-) -> Twisted:
+) -> Search:
     """A new run (``runs.kind = 'plan'``) for ``goal`` from the straight rope, a stored configuration
     or the end configuration of stored run ``from_run``.
 
     ``extra_parameters`` are stored with the options in ``runs.parameters`` (e.g. the model id). The
-    search also removes crossings (:mod:`twisted.planner.untie`, its removing steps' curves from
+    search also removes crossings (:mod:`twisted.planner.both_ways`, its removing steps' curves from
     ``removal_curves``) when it starts from a run's end (``twisted untie``, ``plan --from-run``) or
     when adding moves alone cannot reach the goal from the start.
     """
-    from twisted.planner.untie import (
+    from twisted.planner.both_ways import (
         DEFAULT_REMOVAL_CURVES,
         accepted_configuration,
         both_ways_needed,
         run_end,
     )
-    from twisted.store.search import SearchRun
+    from twisted.store.search_tree import SearchRun
 
     options.validate()
     goal = goal if isinstance(goal, Goal) else state_goal(goal)
@@ -402,7 +402,7 @@ def start_search(
     start = "straight rope" if start_configuration_id is None else f"configuration {start_configuration_id}"
     start = start if from_run is None else f"end of run {from_run}"
     _log_start(f"new search from the {start}", recorder.run_id, goal, options, parameters.get("model_id"))
-    return Twisted(
+    return Search(
         goal,
         tree,
         options,
@@ -417,7 +417,7 @@ def start_search(
 
 
 def tree_from_rows(rows: Sequence[Any]) -> SearchTree:
-    """Rebuild ``T`` from stored nodes (``twisted.store.search.StoredNode``, in ``seq`` order)."""
+    """Rebuild ``T`` from stored nodes (``twisted.store.search_tree.StoredNode``, in ``seq`` order)."""
     from twisted.sim import Curve
 
     tree = SearchTree()
@@ -447,10 +447,16 @@ def resume_search(
     pool: Pool,
     sampler: CurveSampler | None = None,
     stop: StopSignals | None = None,
-    progress: Callable[[Twisted], None] | None = None,
-) -> Twisted:
+    progress: Callable[[Search], None] | None = None,
+) -> Search:
     """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
-    from twisted.store.search import RunBusyError, SearchRun, discard_after_checkpoint, load_run, take_lease
+    from twisted.store.search_tree import (
+        RunBusyError,
+        SearchRun,
+        discard_after_checkpoint,
+        load_run,
+        take_lease,
+    )
 
     info = load_run(store, run_id, with_nodes=False)
     if info is None:
@@ -478,7 +484,7 @@ def resume_search(
     resumed = f"resumed at iteration {checkpoint.iteration} ({checkpoint.elapsed_s:.1f} s searched)"
     _log_start(resumed, run_id, info.goal, options, info.parameters.get("model_id"))
     both_ways = bool(info.parameters.get("both_ways"))
-    return Twisted(
+    return Search(
         info.goal,
         tree,
         options,
@@ -554,7 +560,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
     """
     from twisted.sim import Curve, RopeSim
     from twisted.sim.pool import simulate
-    from twisted.store.search import NoPlanError, solved_run
+    from twisted.store.search_tree import NoPlanError, solved_run
 
     try:
         info, path = solved_run(store, run_id)
@@ -635,7 +641,7 @@ class SearchRequest:
     def check(self) -> None:
         """Raise :class:`PlanInputError` on what is wrong without the store (the goal itself is checked by
         :func:`run_search`: a knot's states can take a minute to enumerate)."""
-        from twisted.planner.untie import check_start
+        from twisted.planner.both_ways import check_start
 
         if self.run_id is not None and not self.resume:
             hint = f"`twisted plan --resume {self.run_id}`"
@@ -667,16 +673,16 @@ class SearchProgress:
     """What :func:`run_search` reports as it goes (override what you show); here nothing is shown and the
     search is kept as ``search`` (a bench reads its tree)."""
 
-    search: Twisted | None = None
+    search: Search | None = None
 
     def phase(self, what: str, spent_s: float) -> None:
         """A step of the set-up begins (``what``: "checking the goal", "loading the model", ...)."""
 
-    def started(self, search: Twisted) -> None:
+    def started(self, search: Search) -> None:
         """The search is built (its run id known), about to run."""
         self.search = search
 
-    def iteration(self, search: Twisted) -> None:
+    def iteration(self, search: Search) -> None:
         """An iteration ended."""
 
 
@@ -806,7 +812,7 @@ def run_search(
         try:
             result = search.run(timeout_s=request.timeout_s, max_iterations=request.max_iterations)
         except Exception as exc:  # a run that dies is marked failed with the reason, not left running
-            from twisted.store.search import mark_failed
+            from twisted.store.search_tree import mark_failed
 
             mark_failed(opened, search.run_id, f"{type(exc).__name__}: {exc}")
             raise
@@ -823,7 +829,7 @@ def _set_up(
     """The goal, the open store, the run chosen and the model of :func:`run_search`. Enumerating a knot's
     states stops at once at a signal or the deadline; the checks in between (database, run, model)
     finish first, so that a bad input is reported as such."""
-    from twisted.planner.untie import make_any_goal
+    from twisted.planner.both_ways import make_any_goal
     from twisted.store.knots import keep_states_by_type
 
     goal = None
@@ -898,7 +904,7 @@ def _begin(
     model_id: int | None,
     pool: Pool,
     stop: StopSignals,
-) -> Twisted:
+) -> Search:
     """The search of :func:`run_search`: run ``choice.run_id`` continued (its lease taken) or a new run."""
     if choice.run_id is not None:
         return resume_search(store, choice.run_id, pool, sampler, stop=stop)

@@ -5,7 +5,7 @@ A search *both ways* is Algorithm 1 with three parts swapped (:func:`both_ways_p
 - its high level plans with adding and removing moves (:func:`twisted.moves.plans_both_ways`, through
   the plan cache under a key of its own), so a state with more crossings than the goal, or with a
   crossing the goal lacks, has plans too;
-- its growth is :class:`twisted.planner.strategies.BothWays`: a result enters ``T`` whenever it has no
+- its growth is :class:`twisted.planner.parts.BothWays`: a result enters ``T`` whenever it has no
   more crossings than the start or the goal, whichever has more (the paper's rule "Cross does not
   drop" would forbid every untying step);
 - the curves of a removing step come from the proposer ``removal_curves`` names: ``model`` (the
@@ -29,7 +29,7 @@ import numpy as np
 from twisted.goals import Goal, PlanInputError, make_goal, state_goal
 from twisted.moves import sub_states
 from twisted.planner.options import MAX_SEED, OptionSpec
-from twisted.planner.strategies import BothWays, RandomCurves
+from twisted.planner.parts import BothWays, RandomCurves
 from twisted.topology import EMPTY, PData, parse_p_data
 
 __all__ = [
@@ -67,7 +67,7 @@ STORED = (
 
 def both_ways_parts(parameters: Mapping[str, Any], goal: Goal, start: PData) -> dict[str, Any]:
     """The parts a run's parameters (``runs.parameters``) make a search both ways with, as keyword
-    arguments of :func:`twisted.planner.strategies.default_parts` (``growth``, ``removal``): none for a
+    arguments of :func:`twisted.planner.parts.default_parts` (``growth``, ``removal``): none for a
     search that adds crossings only (a run stored before removing moves existed is one). ``start``: the
     state of the tree's root. Raises :class:`PlanInputError` on a proposer that does not exist."""
     if not parameters.get("both_ways"):
@@ -126,7 +126,7 @@ def run_end(store: Any, run_id: int) -> RunEnd:
 
     Raises :class:`PlanInputError` when there is no such run or it did not reach its goal.
     """
-    from twisted.store.search import load_run, solution_path
+    from twisted.store.search_tree import load_run, solution_path
 
     info = load_run(store, run_id, with_nodes=False)
     if info is None:
@@ -170,7 +170,7 @@ def accepted_configuration(q: np.ndarray, points: np.ndarray, table: str, row: i
 def check_untie_run(store: Any, run_id: int) -> None:
     """``twisted untie --resume RUN_ID``: PlanInputError unless ``run_id`` is an untie run (a search from a
     run's end to the straight rope), so that a tying search is not continued under the untie command."""
-    from twisted.store.search import load_run
+    from twisted.store.search_tree import load_run
 
     info = load_run(store, run_id, with_nodes=False)
     if info is None:

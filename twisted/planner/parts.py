@@ -1,8 +1,8 @@
 """The parts Algorithm 1 is built from: how it selects a state, a plan and a node, where the curves of a
 plan step come from, and when a reached node ends the search.
 
-:class:`twisted.planner.search.Twisted` runs the loop and keeps the tree and the statistics; each
-decision in it is one of the small classes here, handed in as a :class:`Parts` bundle (the way a
+:class:`twisted.planner.search.Search` runs the loop and keeps the tree and the statistics; each
+decision in it is one of the small classes here, handed in as a :class:`SearchParts` bundle (the way a
 Monte Carlo tree search takes its evaluator and child-selection function):
 
 - state selection (``StateSelection``): :class:`UniformStates` (rnd), :class:`CrossingStates` (crs,
@@ -19,7 +19,7 @@ Monte Carlo tree search takes its evaluator and child-selection function):
   rope pulled tight ties the goal's knot, ``twisted.tighten``);
 - growth (``Growth``): which results enter ``T`` and which reached states get high-level plans:
   :class:`AddingMoves` (Algorithm 1: Cross never drops), :class:`BothWays` (removing moves too, the
-  search of ``twisted untie``; :mod:`twisted.planner.untie`);
+  search of ``twisted untie``; :mod:`twisted.planner.both_ways`);
 - the iteration (``Iteration``): :class:`PlanGuided` (Algorithm 1's lines 5-12) or :class:`LowLevelOnly`
   (the baseline: random curves from random nodes, no high level);
 - :class:`SummandCinch`: toward a composite knot (granny, square), a node whose rope ties one of the
@@ -28,10 +28,10 @@ Monte Carlo tree search takes its evaluator and child-selection function):
   state more (``cinch``, DESIGN 8).
 
 :func:`default_parts` builds the parts that :class:`~twisted.planner.options.PlannerOptions` name
-(the pull test excepted: :mod:`twisted.planner.session` adds it with the run's recorder). Every random
+(the pull test excepted: :mod:`twisted.planner.runs` adds it with the run's recorder). Every random
 choice takes the search's one ``numpy.random.Generator``; the parts that keep state (:class:`R1Room`, a
 cache, and :class:`SummandCinch`, the nodes it cinched) forget what an unfinished iteration added
-(:meth:`Parts.forget`).
+(:meth:`SearchParts.forget`).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ __all__ = [
     "Iteration",
     "LowLevelOnly",
     "NodeSelection",
-    "Parts",
+    "SearchParts",
     "PlanGuided",
     "PlanSelection",
     "PullTest",
@@ -85,7 +85,7 @@ R1_ROOM_FLOOR = 0.02
 
 
 class SearchView(Protocol):
-    """What the parts read of a search (:class:`~twisted.planner.search.Twisted`): the tree, the plans
+    """What the parts read of a search (:class:`~twisted.planner.search.Search`): the tree, the plans
     from every reached state, the statistics tables and the goal."""
 
     tree: SearchTree
@@ -612,10 +612,10 @@ class AddingMoves:
 
 class BothWays:
     """A search with removing moves too (``twisted untie``, ``plan --from-run``;
-    :mod:`twisted.planner.untie`): a result enters ``T`` whenever it has no more crossings than the start
+    :mod:`twisted.planner.both_ways`): a result enters ``T`` whenever it has no more crossings than the start
     or the goal, whichever has more (every state on a both-ways plan does), and every state not in the
     goal gets plans. The high level given must plan both ways
-    (:func:`twisted.planner.session.high_level` with ``both_ways=True``)."""
+    (:func:`twisted.planner.runs.high_level` with ``both_ways=True``)."""
 
     def __init__(self, goal: Goal, start: PData) -> None:
         self.goal = goal
@@ -638,7 +638,7 @@ class Iteration(Protocol):
     plans: bool
 
     def iterate(self, search: Any) -> None:
-        """One iteration of ``search`` (a :class:`~twisted.planner.search.Twisted`)."""
+        """One iteration of ``search`` (a :class:`~twisted.planner.search.Search`)."""
         ...
 
 
@@ -678,7 +678,7 @@ class LowLevelOnly:
 
 
 @dataclass
-class Parts:
+class SearchParts:
     """What one search is built from (see the module's docstring)."""
 
     states: StateSelection
@@ -707,17 +707,17 @@ def default_parts(
     goal_test: GoalTest | None = None,
     growth: Growth | None = None,
     removal: BlindCurves | None = None,
-) -> Parts:
+) -> SearchParts:
     """The parts ``options`` name: heuristic -> state and plan selection, ``retry_weight`` and ``r1_room``
     -> node selection (and the room the crs and plan choices weigh), ``cross_move`` -> the scripted share
     of a Cross step (planner twisted), planner ``low-level-only`` -> :class:`LowLevelOnly` iterations
     (else :class:`PlanGuided`); ``sampler`` (None: random curves) proposes the other curves.
     ``goal_test`` defaults to :class:`StateMatch`; with ``options.tighten`` it must be given (a
-    :class:`PullTest`, as :mod:`twisted.planner.session` makes it). ``growth`` defaults to
+    :class:`PullTest`, as :mod:`twisted.planner.runs` makes it). ``growth`` defaults to
     :class:`AddingMoves`; ``removal``: the proposer of a removing step's curves (None: ``sampler``)."""
     if goal_test is None:
         if options.tighten:
-            raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
+            raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.runs)")
         goal_test = StateMatch(goal)
     room = R1Room(options.r1_room) if options.r1_room > 0.0 else None
     cinch = SummandCinch(goal) if options.cinch else None
@@ -733,7 +733,7 @@ def default_parts(
         states, plans = CrossingStates(room, cinch), UniformPlans(room)
     random_curves = RandomCurves()
     share = options.cross_move if options.planner == "twisted" else 0.0
-    return Parts(
+    return SearchParts(
         states=states,
         plans=plans,
         nodes=RetryWeightedNodes(options.retry_weight, room, cinch),
