@@ -5,23 +5,29 @@ A row is claimed (:func:`claim`) when its goal starts and gets the planner's run
 planner made one; a claim skips ``solved``/``timeout`` rows and rows a live process holds, and takes
 over ``interrupted`` ones and rows of a process that died, continuing from the planner's own checkpoint
 (same run id, elapsed time carried over). :func:`free_row` marks the row of a runner that died holding
-it; :func:`pending_tasks` lists what an evaluation still has to run.
+it; :func:`pending_tasks` lists what an evaluation still has to run. The rows are read and written
+through named functions of :mod:`twisted.store.experiments` (``claim_result``, ``update_result``,
+``free_result``, ``result_rows``).
 """
 
 from __future__ import annotations
 
-import os
-import socket
 import time
 import traceback
 from collections.abc import Mapping
 from typing import Any
 
-from sqlalchemy import select, update
-from sqlalchemy.exc import IntegrityError
-
 from twisted.experiments.tasks import EvalSummary, EvalTask, PreparedEval, TaskKind, TaskOutcome
-from twisted.store.experiments import FINISHED_STATUSES, EvalResult, pid_alive, start_eval_run
+from twisted.store.experiments import (
+    FINISHED_STATUSES,
+    ResultKey,
+    claim_result,
+    free_result,
+    pid_alive,
+    result_rows,
+    start_eval_run,
+    update_result,
+)
 from twisted.store.models import utcnow
 
 __all__ = [
@@ -32,64 +38,18 @@ __all__ = [
     "pending_tasks",
     "result_key",
     "run_task",
-    "set_row",
     "start_eval",
 ]
 
 
-def result_key(task: EvalTask) -> Any:
-    """SQL condition selecting the result row of ``task`` (set, label, goal, seed, timeout, friction)."""
-    return (
-        (EvalResult.set_id == task.set_id)
-        & (EvalResult.planner == task.label)
-        & (EvalResult.goal_key == task.goal_key)
-        & (EvalResult.seed == task.seed)
-        & (EvalResult.timeout_s == task.timeout_s)
-        & (EvalResult.friction_scale == task.friction_scale)
-    )
+def result_key(task: EvalTask) -> ResultKey:
+    """The key of the result row of ``task`` (set, label, goal, seed, timeout, friction)."""
+    return ResultKey(task.set_id, task.label, task.goal_key, task.seed, task.timeout_s, task.friction_scale)
 
 
 def claim(store: Any, task: EvalTask) -> tuple[int, int | None] | None:
     """Mark the task's row ``running`` for this process; (row id, planner run to resume) or None."""
-    me = (socket.gethostname(), os.getpid())
-    try:
-        with store.session(write=True) as session:
-            row = session.scalar(select(EvalResult).where(result_key(task)))
-            if row is not None:
-                if row.status in FINISHED_STATUSES:
-                    return None
-                if row.status == "running" and (row.host, row.pid) != me and pid_alive(row.host, row.pid):
-                    return None
-                resume = row.plan_run_id
-                row.status, row.eval_run_id, row.host, row.pid = "running", task.eval_run_id, *me
-                row.started_at, row.ended_at, row.message = utcnow(), None, None
-                return row.id, resume
-            row = EvalResult(
-                eval_run_id=task.eval_run_id,
-                set_id=task.set_id,
-                problem_id=task.problem_id,
-                planner=task.label,
-                goal_key=task.goal_key,
-                seed=task.seed,
-                timeout_s=task.timeout_s,
-                friction_scale=task.friction_scale,
-                status="running",
-                solved=False,
-                host=me[0],
-                pid=me[1],
-                started_at=utcnow(),
-            )
-            session.add(row)
-            session.flush()
-            return row.id, None
-    except IntegrityError:  # another process inserted the same key first
-        return None
-
-
-def set_row(store: Any, row_id: int, **values: Any) -> None:
-    """Update the result row ``row_id`` (in its own transaction)."""
-    with store.session(write=True) as session:
-        session.execute(update(EvalResult).where(EvalResult.id == row_id).values(**values))
+    return claim_result(store, result_key(task), task.eval_run_id, task.problem_id)
 
 
 def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
@@ -111,7 +71,7 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         class RowProgress(SearchProgress):
             def started(self, search: Any) -> None:  # the row names its planner run from the start
                 assert row_id is not None
-                set_row(store, row_id, plan_run_id=search.run_id)
+                update_result(store, row_id, plan_run_id=search.run_id)
 
         stop = StopSignals()
         with stop.installed():
@@ -122,7 +82,7 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
             # the goal node's creation time is the moment the goal entered T
             goal_node = result.path[-1] if result.path else None
             time_to_solve = getattr(goal_node, "created_s", None) or result.elapsed_s
-        set_row(
+        update_result(
             store,
             row_id,
             status=status,
@@ -141,7 +101,7 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         message = "interrupted" if interrupted else "".join(traceback.format_exception_only(exc)).strip()
         if row_id is not None:
             try:
-                set_row(
+                update_result(
                     store,
                     row_id,
                     status="interrupted" if interrupted else "failed",
@@ -188,14 +148,7 @@ def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tup
     """Tasks still to run (finished ones and ones another live process holds are left out)."""
     record, planner, label = prepared.record, prepared.planner, prepared.label
     timeout_s, friction_scale = prepared.timeout_s, prepared.friction_scale
-    rows = session.scalars(
-        select(EvalResult).where(
-            (EvalResult.set_id == record.id)
-            & (EvalResult.planner == label)
-            & (EvalResult.timeout_s == timeout_s)
-            & (EvalResult.friction_scale == friction_scale)
-        )
-    ).all()
+    rows = result_rows(session, record.id, label, timeout_s, friction_scale)
     by_key = {(r.goal_key, r.seed): r for r in rows}
     tasks, done = [], 0
     for seed in prepared.seeds:
@@ -227,12 +180,7 @@ def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tup
 
 def free_row(store: Any, task: EvalTask, message: str) -> None:
     """Mark the task's row ``interrupted`` when it is still ``running``: its runner died holding it."""
-    with store.session(write=True) as session:
-        session.execute(
-            update(EvalResult)
-            .where(result_key(task) & (EvalResult.status == "running"))
-            .values(status="interrupted", message=message)
-        )
+    free_result(store, result_key(task), message)
 
 
 def lost_task(store: Any, task: EvalTask, status: str, message: str) -> TaskOutcome:

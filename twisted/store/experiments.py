@@ -41,6 +41,7 @@ from sqlalchemy import (
     select,
     update,
 )
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import KNOT_PREFIX
@@ -57,7 +58,12 @@ __all__ = [
     "ProblemRecord",
     "ProblemSet",
     "ProblemSetRecord",
+    "ResultKey",
+    "claim_result",
     "delete_problem_set",
+    "free_result",
+    "result_rows",
+    "update_result",
     "list_problem_sets",
     "load_problem_set",
     "save_problem_set",
@@ -365,3 +371,98 @@ def pid_alive(host: str | None, pid: int | None) -> bool:
     if host != socket.gethostname():
         return host is not None
     return pid is not None and process_alive(pid)
+
+
+@dataclass(frozen=True)
+class ResultKey:
+    """The unique key of an ``eval_results`` row: set, planner label, goal, seed, timeout, friction."""
+
+    set_id: int
+    planner: str  # the label the results are stored under
+    goal_key: str
+    seed: int
+    timeout_s: float
+    friction_scale: float
+
+    def where(self) -> Any:
+        """The SQL condition selecting the row."""
+        return (
+            (EvalResult.set_id == self.set_id)
+            & (EvalResult.planner == self.planner)
+            & (EvalResult.goal_key == self.goal_key)
+            & (EvalResult.seed == self.seed)
+            & (EvalResult.timeout_s == self.timeout_s)
+            & (EvalResult.friction_scale == self.friction_scale)
+        )
+
+
+def claim_result(
+    store: Any, key: ResultKey, eval_run_id: int, problem_id: int
+) -> tuple[int, int | None] | None:
+    """Mark the row of ``key`` ``running`` for this process (inserting it when new); (row id, planner run
+    to resume) or None when it is finished or a live process holds it (or inserted it meanwhile)."""
+    me = (socket.gethostname(), os.getpid())
+    try:
+        with store.session(write=True) as session:
+            row = session.scalar(select(EvalResult).where(key.where()))
+            if row is not None:
+                if row.status in FINISHED_STATUSES:
+                    return None
+                if row.status == "running" and (row.host, row.pid) != me and pid_alive(row.host, row.pid):
+                    return None
+                resume = row.plan_run_id
+                row.status, row.eval_run_id, row.host, row.pid = "running", eval_run_id, *me
+                row.started_at, row.ended_at, row.message = utcnow(), None, None
+                return row.id, resume
+            row = EvalResult(
+                eval_run_id=eval_run_id,
+                set_id=key.set_id,
+                problem_id=problem_id,
+                planner=key.planner,
+                goal_key=key.goal_key,
+                seed=key.seed,
+                timeout_s=key.timeout_s,
+                friction_scale=key.friction_scale,
+                status="running",
+                solved=False,
+                host=me[0],
+                pid=me[1],
+                started_at=utcnow(),
+            )
+            session.add(row)
+            session.flush()
+            return row.id, None
+    except IntegrityError:  # another process inserted the same key first
+        return None
+
+
+def update_result(store: Any, row_id: int, **values: Any) -> None:
+    """Update the result row ``row_id`` (in its own transaction)."""
+    with store.session(write=True) as session:
+        session.execute(update(EvalResult).where(EvalResult.id == row_id).values(**values))
+
+
+def free_result(store: Any, key: ResultKey, message: str) -> None:
+    """Mark the row of ``key`` ``interrupted`` when it is still ``running`` (its runner died holding it)."""
+    with store.session(write=True) as session:
+        session.execute(
+            update(EvalResult)
+            .where(key.where() & (EvalResult.status == "running"))
+            .values(status="interrupted", message=message)
+        )
+
+
+def result_rows(
+    session: Session, set_id: int, planner: str, timeout_s: float, friction_scale: float
+) -> list[EvalResult]:
+    """The result rows of one evaluation's key (set, label, timeout, friction), every goal and seed."""
+    return list(
+        session.scalars(
+            select(EvalResult).where(
+                (EvalResult.set_id == set_id)
+                & (EvalResult.planner == planner)
+                & (EvalResult.timeout_s == timeout_s)
+                & (EvalResult.friction_scale == friction_scale)
+            )
+        )
+    )
