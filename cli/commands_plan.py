@@ -30,6 +30,7 @@ from cli.app import (
     err_console,
     fail,
     open_db,
+    shown_name,
     store_exists,
     unwritable,
 )
@@ -515,7 +516,7 @@ def _print_result(search: Any, result: Any, as_json: bool, setup_s: float = 0.0)
     outcome = "[bold green]solved[/]" if result.solved else f"[bold red]not solved ({result.status})[/]"
     console.print(
         f"run {result.run_id}: {outcome}"
-        f"  goal {search.goal.label}"
+        f"  goal {shown_name(search.goal.label)}"  # a knot name read back from the store
         + (f" reached {result.path[-1].p_data.key}" if result.path and search.goal.knot else "")
         + f"  search time {result.elapsed_s:.1f} s (set-up {setup_s:.1f} s)"
         f"  simulator calls {result.sim_calls}{_expand_share(result)}"
@@ -611,7 +612,8 @@ def replay_command(
             if result.reached_goal
             else "[bold red]does not reach the goal[/]"
         )
-        console.print(f"run {run_id}: the replayed plan {verdict} {result.goal.label}", highlight=False)
+        goal = shown_name(result.goal.label)  # a knot name read back from the store
+        console.print(f"run {run_id}: the replayed plan {verdict} {goal}", highlight=False)
         if tighten:
             t = result.tightened
             wanted = ", ".join(sorted(result.goal.knot_types)) or "no knot (the goal state is a knotoid)"
