@@ -11,6 +11,9 @@ checks besides. Nothing outside ``--work`` (default: a temporary folder) is writ
 
 The trials of items 3, 5, 6, 8, 9 and 11 (the other half of the issue) come from
 ``bench/probe_store.py`` in the same form; items 12 and 13 need a Ray cluster and are tested there.
+Items ``62.5``, ``62.6``, ``62.10`` and ``62.11`` are issue 62's runs and checkpoints read back from the
+store (bad parameters, checkpoints and end configurations, ``untie --resume`` of a plan run, a Ctrl-C as
+a run solves): they add three small runs to the copy (random curves, no model) and plant into them.
 """
 
 from __future__ import annotations
@@ -19,10 +22,12 @@ import argparse
 import hashlib
 import io
 import json
+import math
 import os
 import pickle
 import shutil
 import sqlite3
+import struct
 import subprocess
 import sys
 import tempfile
@@ -438,6 +443,155 @@ TRIALS: list[Trial] = [
     ),
     Trial("10", "sets a/b and a_b", "distinct pictures (or one refused)", pictures_of_similar_names, None),
 ]
+
+
+# ---- issue 62 items 5, 6, 10, 11: runs and checkpoints read back from the store -------------------------
+
+_RUNS_STORES: dict[Path, Path] = {}  # the store given -> a copy of it with the three runs below (made once)
+
+
+def _runs_store(db: Path, work: Path) -> tuple[int, int, int]:
+    """Give ``db`` (a copy of the probed store) a solved plan run, a plan run stopped before its first
+    iteration and an untie of the first stopped the same way (random curves, no model); their ids."""
+    prepared = _RUNS_STORES.get(work.parent)
+    if prepared is None:
+        prepared = work.parent / "runs-store.db"
+        shutil.copyfile(db, prepared)
+        plan = ["plan", "--goal", ONE, "--planner", "random-low", "--workers", "1", "--seed", "0"]
+        cli(prepared, *plan, "--max-iterations", "40", cwd=work.parent)
+        solved = str(_newest_run(prepared))
+        cli(prepared, *plan, "--max-iterations", "0", cwd=work.parent)
+        untie = ["untie", solved, "--planner", "random-low", "--workers", "1", "--max-iterations", "0"]
+        cli(prepared, *untie, cwd=work.parent)
+        _RUNS_STORES[work.parent] = prepared
+    shutil.copyfile(prepared, db)
+    newest = _newest_run(db)
+    return newest - 2, newest - 1, newest
+
+
+def _newest_run(db: Path) -> int:
+    conn = sqlite3.connect(db)
+    row = conn.execute("select max(run_id) from search_runs").fetchone()
+    conn.close()
+    return int(row[0] or 0)
+
+
+def _run_states(db: Path) -> dict[int, str]:
+    """Each planner run's ``runs.status`` / ``search_runs.outcome``."""
+    conn = sqlite3.connect(db)
+    rows = conn.execute(
+        "select r.id, r.status || '/' || s.outcome from runs r join search_runs s on s.run_id = r.id"
+    ).fetchall()
+    conn.close()
+    return dict(rows)
+
+
+def stored_run_value(plant: str, command: str) -> Callable[[Path, Path], str]:
+    """Plant a hostile value (``plant``: SQL with {solved}, {stopped}, {untie} for the run ids) and run
+    ``command`` (the same placeholders); report the exit, a traceback, and whether a run changed state or
+    the store changed."""
+
+    def trial(db: Path, work: Path) -> str:
+        solved, stopped, untie = _runs_store(db, work)
+        ids = {"solved": solved, "stopped": stopped, "untie": untie}
+        conn = sqlite3.connect(db)
+        conn.execute(plant.format(**ids), ("[" * 200_000 + "]" * 200_000,) if "?" in plant else ())
+        conn.commit()
+        conn.close()
+        before, states = digest(db), _run_states(db)
+        out = cli(db, *command.format(**ids).split(), cwd=work, timeout=120)
+        moved = [
+            f"run {i} {states.get(i, 'new')} -> {state}"
+            for i, state in _run_states(db).items()
+            if states.get(i) != state
+        ]
+        return said(out, "".join(f", {m}" for m in moved) + _changed(db, before))
+
+    return trial
+
+
+def ctrl_c_as_it_solves(db: Path, work: Path) -> str:
+    """SIGINT sent as `plan` prints its solved result (what ended in exit 130 / -2 with no word)."""
+    import signal
+    import time
+
+    command = [sys.executable, "-m", "cli.main", "--db", f"sqlite:///{db}", "plan", "--goal", ONE]
+    command += ["--planner", "random-low", "--workers", "1", "--seed", "0", "--max-iterations", "40"]
+    child = subprocess.Popen(command, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert child.stdout is not None
+    for line in child.stdout:
+        if "solved" in line:
+            break
+    time.sleep(0.3)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=120)
+    solved = _run_states(db)[_newest_run(db)] == "finished/solved"
+    return f"exit {child.returncode}, run stored solved: {bool(solved)}: {' '.join(err.split())[:150]}"
+
+
+RESUME = "plan --resume {stopped} --workers 1 --max-iterations 2"
+UNTIE = "untie {solved} --workers 1 --timeout 60"
+PARAMETER = "update runs set parameters = json_set(parameters, '$.{name}', {value}) where id = {{stopped}}"
+CHECKPOINT = "update search_checkpoints set {column} = {value} where run_id = {{stopped}}"
+END_Q = (
+    "update search_nodes set q = X'{blob}' "
+    "where id = (select goal_node_id from search_runs where run_id = {{solved}})"
+)
+MT19937 = {"bit_generator": "MT19937", "state": {"key": [0] * 624, "pos": 624}}
+MT19937_TEXT = json.dumps(MT19937).replace("{", "{{").replace("}", "}}")  # read by str.format once more
+
+
+def _q(*values: float) -> str:
+    return struct.pack(f"<{len(values)}d", *values).hex()
+
+
+RUN_TRIALS = [
+    *(
+        Trial("62.5", f"plan --resume, {name} = {value}", "exit 2, run unchanged",
+              stored_run_value(PARAMETER.format(name=name, value=value), RESUME), exit2_clean)
+        for name, value in (("k", "-1"), ("seed", "-5"), ("heuristic", "'x'"), ("p_expand", "'x'"),
+                            ("removal_curves", "'evil'"))
+    ),
+    *(
+        Trial("62.5", f"plan --resume, {name}", "exit 2, run unchanged", stored_run_value(plant, RESUME),
+              exit2_clean)
+        for name, plant in (
+            ("rng_state MT19937", CHECKPOINT.format(column="rng_state", value=f"'{MT19937_TEXT}'")),
+            ("iteration -5", CHECKPOINT.format(column="iteration", value="-5")),
+            ("stats 'garbage'", CHECKPOINT.format(column="stats", value="'garbage'")),
+            ("parameters a string", "update runs set parameters = '\"abc\"' where id = {stopped}"),
+            ("parameters a list", "update runs set parameters = '[1, 2]' where id = {stopped}"),
+        )
+    ),
+    *(
+        Trial("62.5", f"{command.split()[0]}, parameters {what}", "exit 2, run unchanged",
+              stored_run_value(plant, command), exit2_clean)
+        for what, plant in (
+            ("'not json'", "update runs set parameters = 'not json' where id = {solved}"),
+            ("200k levels deep", "update runs set parameters = ? where id = {solved}"),
+        )
+        for command in (
+            UNTIE,
+            "replay {solved}",
+            "render --run {solved} --out r.png --no-gl",
+        )
+    ),
+    *(
+        Trial("62.6", f"untie, end q {name}", "exit 2, no run created",
+              stored_run_value(END_Q.format(blob=blob), UNTIE), exit2_clean)
+        for name, blob in (
+            ("of 5 floats", _q(*[0.0] * 5)),
+            ("all NaN", _q(*[math.nan] * 93)),
+            ("all 1e300", _q(*[1e300] * 93)),
+            ("all zeros", _q(*[0.0] * 93)),
+        )
+    ),
+    Trial("62.10", "untie --resume of a plan run", "exit 2, run unchanged",
+          stored_run_value("select 1", "untie {stopped} --resume --workers 1"), exit2_clean),
+    Trial("62.11", "Ctrl-C as plan prints its solved run", "exit 0, run solved", ctrl_c_as_it_solves,
+          lambda t: t.startswith("exit 0, run stored solved: True")),
+]
+TRIALS += RUN_TRIALS
 
 
 def _store_trials() -> list[Trial]:

@@ -28,7 +28,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from lib.steps import move_class, stored_pairs
+from lib.steps import choose, move_class, pairs_from
 
 from twisted.model.registry import load_model
 from twisted.model.sampler import ModelCurves
@@ -41,29 +41,6 @@ from twisted.store import open_store
 from twisted.topology import parse_p_data
 
 WITHIN = (1, 2, 5)
-
-
-def pairs_from(db: str, sets: list[str], labels: list[str], cross: int) -> list[dict[str, Any]]:
-    """Every (node, next state) pair the runs tried from states of ``cross`` crossings that one move
-    explains, with its node."""
-    with open_store(db) as store:
-        return [
-            {"run": run_id, "node": node, "next": nxt, "move": move, "tried": tried, "reached": reached}
-            for run_id, _, node, nxt, move, tried, reached in stored_pairs(store, sets, labels)
-            if node.p_data.cross == cross and move is not None
-        ]
-
-
-def choose(pairs: list[dict[str, Any]], n: int, rng: np.random.Generator) -> list[dict[str, Any]]:
-    """Up to ``n`` never-reached pairs and ``n`` reached ones, drawn uniformly, in their stored order."""
-    chosen = []
-    for name, group in (
-        ("failed", [p for p in pairs if p["reached"] == 0]),
-        ("reached", [p for p in pairs if p["reached"] > 0]),
-    ):
-        picks = sorted(rng.choice(len(group), size=min(n, len(group)), replace=False)) if group else []
-        chosen += [dict(group[int(i)], group=name) for i in picks]
-    return chosen
 
 
 def save_pairs(path: str, chosen: list[dict[str, Any]], cross: int) -> None:

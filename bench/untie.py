@@ -14,7 +14,7 @@
 (``--knot figure-eight --knot-seeds 0 1``, likewise) and states drawn
 at random (seeded) among all states of the given crossing counts (``--states 4 5``: one 4- and one
 5-crossing state), each a plan run with the shipped model. ``run`` starts an untie search
-(:func:`twisted.planner.start_search` with ``from_run``, goal ``[]``) from every solved run that is
+(:func:`twisted.planner.run_search` with ``from_run``, goal ``[]``) from every solved run that is
 not itself a both-ways search, once per proposer of the removing steps' curves (``random``: uniform
 random curves; ``model``: the inverse model conditioned on the removing move), with the planner's
 default options otherwise (``--seed``). ``retie`` searches from the end of each solved overhand run
@@ -36,21 +36,22 @@ from sqlalchemy import select
 
 from twisted.goals import knot_goal, state_goal
 from twisted.moves import enumerate_states
-from twisted.planner import PlannerOptions, curve_sampler, start_search
+from twisted.planner import PlannerOptions, SearchProgress, SearchRequest, run_search
 from twisted.planner.untie import REMOVAL_CURVES
-from twisted.sim.pool import SimPool
 from twisted.store import open_store
 from twisted.store.search import SearchRunRow, load_run
 from twisted.topology import EMPTY
 
 
-def _search(
-    store: Any, pool: Any, sampler: Any, goal: Any, options: PlannerOptions, timeout: float, **kw: Any
-) -> Any:
+def _search(store: Any, goal: Any, options: PlannerOptions, timeout: float, **kw: Any) -> Any:
+    """One search with the shipped model and one simulator in this process (the search time timed)."""
     started = time.perf_counter()
-    search = start_search(store, goal, options, pool, sampler, extra_parameters={"model_id": None}, **kw)
-    result = search.run(timeout_s=timeout)
-    return search, result, time.perf_counter() - started
+    request = SearchRequest(
+        goal=goal.spec, options=options.to_dict(), workers=1, timeout_s=timeout, timed_setup=False, **kw
+    )
+    progress = SearchProgress()
+    result = run_search(store, request, progress=progress)
+    return progress.search, result, time.perf_counter() - started
 
 
 def make(args: argparse.Namespace) -> None:
@@ -64,10 +65,9 @@ def make(args: argparse.Namespace) -> None:
         for i, n in enumerate(args.states):
             state = layers[n][int(rng.integers(len(layers[n])))]
             goals.append((f"{n}-crossing {state.key}", state_goal(state), PlannerOptions(seed=i)))
-    with open_store(args.db) as store, SimPool(1) as pool:
-        sampler, _ = curve_sampler(store, "twisted")
+    with open_store(args.db) as store:
         for label, goal, options in goals:
-            search, result, wall = _search(store, pool, sampler, goal, options, args.timeout)
+            search, result, wall = _search(store, goal, options, args.timeout)
             print(
                 f"run {result.run_id}: {label}: {result.status}, {result.elapsed_s:.1f} s, "
                 f"{result.sim_calls} calls ({wall:.1f} s wall)",
@@ -105,8 +105,7 @@ def _summary(rows: list[dict[str, Any]], key: str) -> None:
 
 def untie(args: argparse.Namespace) -> list[dict[str, Any]]:
     rows = []
-    with open_store(args.db) as store, SimPool(1) as pool:
-        sampler, _ = curve_sampler(store, "twisted")
+    with open_store(args.db) as store:
         runs = args.runs or _tied_runs(store)
         for run_id in runs:
             start = load_run(store, run_id, with_nodes=False)
@@ -114,9 +113,8 @@ def untie(args: argparse.Namespace) -> list[dict[str, Any]]:
             for proposer in args.removal_curves:
                 options = PlannerOptions(seed=args.seed)
                 search, result, wall = _search(
-                    store, pool, sampler, state_goal(EMPTY), options, args.timeout,
-                    from_run=run_id, removal_curves=proposer,
-                )  # fmt: skip
+                    store, state_goal(EMPTY), options, args.timeout, from_run=run_id, removal_curves=proposer
+                )
                 row = _row(run_id, start.goal.spec, search, result, wall, proposer=proposer)
                 rows.append(row)
                 print(json.dumps(row), flush=True)
@@ -127,15 +125,13 @@ def untie(args: argparse.Namespace) -> list[dict[str, Any]]:
 def retie(args: argparse.Namespace) -> list[dict[str, Any]]:
     rows = []
     goal = knot_goal(args.knot)
-    with open_store(args.db) as store, SimPool(1) as pool:
-        sampler, _ = curve_sampler(store, "twisted")
+    with open_store(args.db) as store:
         for run_id in args.runs or _tied_runs(store, knot=args.from_knot):
             for seed in args.seeds:
                 options = PlannerOptions(seed=seed, tighten=args.tighten, cinch=not args.no_cinch)
                 search, result, wall = _search(
-                    store, pool, sampler, goal, options, args.timeout, from_run=run_id,
-                    removal_curves=args.removal_curves[0],
-                )  # fmt: skip
+                    store, goal, options, args.timeout, from_run=run_id, removal_curves=args.removal_curves[0]
+                )
                 row = _row(run_id, args.from_knot or "", search, result, wall, seed=seed, cinch=options.cinch)
                 rows.append(row)
                 print(json.dumps(row), flush=True)

@@ -28,6 +28,7 @@ EXIT_BAD_INPUT = 2
 EXIT_NOT_REACHED = 3
 
 DEFAULT_DB = "sqlite:///twisted.db"
+GLOBAL_PANEL = "Global options"  # the --help panel of the options every command takes
 
 # Every integer the CLI takes ends up in a 64-bit column or a numpy generator; seeds in runs.seed (BIGINT).
 MAX_INT = 2**63 - 1
@@ -105,6 +106,25 @@ def harden(command: Any) -> None:
         harden(sub)
 
 
+def readable_help(command: Any) -> None:
+    """``--help`` that reads, for ``command`` and its subcommands: a docstring's paragraphs flow as prose
+    (typer keeps the line breaks of every paragraph after the first, cutting sentences mid-line), and a
+    flag shows no ``<bool>`` value placeholder (it takes no value)."""
+    if getattr(command, "_twisted_readable", False):
+        return
+    if command.help:
+        paragraphs = inspect.cleandoc(command.help).split("\n\n")
+        command.help = "\n\n".join(p if p.startswith("\b") else " ".join(p.split()) for p in paragraphs)
+    import click
+
+    for param in [*command.params, command.get_help_option(click.Context(command))]:
+        if getattr(param, "is_flag", False) and param.metavar is None:
+            param.metavar = ""
+    command._twisted_readable = True
+    for sub in getattr(command, "commands", {}).values():
+        readable_help(sub)
+
+
 class _Commands(TyperGroup):
     """The root command group: numbers are checked (:func:`harden`) before any command runs, and a
     command ended by Ctrl-C / SIGTERM exits 130 / 143 with one line instead of a traceback."""
@@ -113,6 +133,7 @@ class _Commands(TyperGroup):
         from twisted import runtime
 
         harden(self)
+        readable_help(self)
         runtime.received.clear()  # of an earlier command in this process (tests)
         try:
             return super().main(*args, **kwargs)
@@ -135,10 +156,33 @@ class _Commands(TyperGroup):
         except BaseException as exc:
             code = runtime.exit_code(exc)
             if code is None:
+                _refuse_stored_value(exc)
                 raise
-            err_console.print(f"interrupted (exit {code}) before the command finished", highlight=False)
             runtime.received.clear()  # reported
+            if _running.done is not None:
+                err_console.print(
+                    f"interrupted after {_running.done}: that stands (exit 0); what the command had left "
+                    "to do after it (printing, a picture) may be cut short",
+                    highlight=False,
+                )
+                raise typer.Exit(EXIT_OK) from None
+            err_console.print(f"interrupted (exit {code}) before the command finished", highlight=False)
             raise typer.Exit(code) from None
+
+
+def done_before_interrupt(what: str) -> None:
+    """The command has stored ``what`` for good (e.g. "run 6 was solved and stored"): a Ctrl-C or SIGTERM
+    from here on ends it with exit 0 and a line saying so, not 130 (which means "resume it")."""
+    _running.done = what
+
+
+def _refuse_stored_value(exc: BaseException) -> None:
+    """A value read back from the store that its boundary refused (:mod:`twisted.store.boundary`): exit 2
+    with "table, row, field: what is wrong", whichever command read it."""
+    from twisted.store.boundary import StoredValueError
+
+    if isinstance(exc, StoredValueError):
+        fail(str(exc))
 
 
 class Commands(typer.Typer):
@@ -181,6 +225,7 @@ class AppState:
     log_file: Path | None = None
     verbose: bool = False
     force: bool = False
+    done: str | None = None  # what the command has stored for good (done_before_interrupt)
 
 
 # the global options of the command that runs (what unwritable() checks outputs against)
@@ -196,6 +241,7 @@ def _db_option(default: str | None, **extra: Any) -> Any:
         metavar="URL",
         help="Database URL (SQLite file or postgresql+psycopg://...); given after the command it wins "
         "over one given before it.",
+        rich_help_panel=GLOBAL_PANEL,
         **extra,
     )
 
@@ -214,16 +260,21 @@ def _log_file_option() -> Any:
         callback=_checked_log_file,
         help="Append the log (timestamped: start, parameters, progress, end) to this file.",
         show_default=False,
+        rich_help_panel=GLOBAL_PANEL,
     )
 
 
 def _verbose_option() -> Any:
-    return typer.Option(False, "--verbose", help="Show the log on the console too, down to DEBUG.")
+    help = "Show the log on the console too, down to DEBUG."
+    return typer.Option(False, "--verbose", help=help, rich_help_panel=GLOBAL_PANEL)
 
 
 def _force_option() -> Any:
     return typer.Option(
-        False, "--force", help="Let an output (--out, --export, --picture, ...) write over an existing file."
+        False,
+        "--force",
+        help="Let an output (--out, --export, --picture, ...) write over an existing file.",
+        rich_help_panel=GLOBAL_PANEL,
     )
 
 

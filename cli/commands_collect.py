@@ -35,84 +35,10 @@ def _pct(value: Any) -> str:
     return "-" if value is None else f"{100 * value:.1f} %"
 
 
-@app.command("collect")
-def collect_command(
-    ctx: typer.Context,
-    hours: float = typer.Option(..., "--hours", help="How long to collect (hours, > 0; e.g. 0.5)."),
-    workers: int | None = typer.Option(
-        None, "--workers", help="Simulation processes (default: the machine's CPU cores)."
-    ),
-    seed: int | None = seed_option(None, "Seed of every random choice (default: random, stored)."),
-    batch_size: int = typer.Option(
-        20, "--batch-size", help="Kept transitions per committed batch (also ~2 s)."
-    ),
-    max_cross: int = typer.Option(
-        MAX_CROSSINGS, "--max-cross", help="Keep transitions up to this many crossings."
-    ),
-    cross_bias: float = typer.Option(
-        1.0,
-        "--cross-bias",
-        help="D_Q bias: start crossing count c weighs (1+c)**bias (0: uniform over counts).",
-    ),
-    max_kept: int | None = typer.Option(
-        None, "--max-kept", help="Also stop after this many kept transitions."
-    ),
-    max_tries: int | None = typer.Option(None, "--max-tries", help="Also stop after this many tried curves."),
-    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (1 = nominal)."),
-    across_share: float = typer.Option(
-        0.8,
-        "--across-share",
-        help="Share of curves aimed across another strand (the rest uniform; 0: all uniform).",
-    ),
-    remove_share: float = typer.Option(
-        0.0,
-        "--remove-share",
-        help="Also keep a transition that removes crossings, with this probability (0: only those that "
-        "add crossings, the paper's D_Q); see docs/untie.md.",
-    ),
-    use_ray: bool = typer.Option(
-        False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
-    ),
-    ray_address: str | None = ray_address_argument(),
-) -> None:
-    """Collect transitions that add crossings (D_Q reset scheme) into the database, resumably.
-
-    Running it again continues from the configurations already in the database. Ctrl-C or SIGTERM
-    stops cleanly (the last batch is committed and the run marked interrupted).
-    """
-    from twisted.collect import CollectError, CollectOptions, CollectProgress, collect
-    from twisted.distributed import DistributedError, collect_on_ray, import_ray, resolve_address
-    from twisted.runtime import cpu_cores
-
-    if not use_ray:
-        check_workers(workers)
-    elif workers is not None and not 1 <= workers <= MAX_RAY_WORKERS:
-        fail(f"--workers {workers}: give 1 to {MAX_RAY_WORKERS} Ray workers", EXIT_BAD_INPUT)
-    try:  # Ray problems first, before any database is created
-        address = resolve_address(use_ray, ray_address)
-        if use_ray:
-            import_ray()
-    except DistributedError as exc:
-        fail(str(exc), EXIT_BAD_INPUT)
-
-    options = CollectOptions(
-        hours=hours,
-        workers=cpu_cores() if workers is None else workers,
-        seed=seed,
-        batch_size=batch_size,
-        max_cross=max_cross,
-        cross_bias=cross_bias,
-        max_kept=max_kept,
-        max_tries=max_tries,
-        friction_scale=friction_scale,
-        across_share=across_share,
-        remove_share=remove_share,
-    )
-    try:
-        options.validate()
-    except CollectError as exc:
-        fail(str(exc), EXIT_BAD_INPUT)
-    store = open_db(ctx)
+def _collect_shown(store: Any, options: Any, use_ray: bool, address: Any, workers: int | None) -> Any:
+    """Collect (on Ray with ``use_ray``) with a progress bar; the run's summary."""
+    from twisted.collect import CollectProgress, collect
+    from twisted.distributed import DistributedError, collect_on_ray
 
     columns = (
         TextColumn("[bold]run {task.fields[run]}"),
@@ -159,6 +85,11 @@ def collect_command(
         except DistributedError as exc:
             fail(str(exc), EXIT_BAD_INPUT)
 
+    return summary
+
+
+def _report(summary: Any) -> None:
+    """What a collect run kept; exit 1 when it failed, 130 / 143 when it was stopped."""
     console.print(
         f"run {summary.run_id} {summary.status}: kept {summary.kept:,} of {summary.tried:,} curves "
         f"({summary.rejected:,} rejected by the simulator) in {_hms(summary.wall_seconds)} with "
@@ -173,6 +104,87 @@ def collect_command(
     if summary.status == "interrupted":
         console.print(f"[yellow]{summary.message}[/]; run `twisted collect` again to continue the same D_Q")
         raise typer.Exit(signal_exit_code(summary.signum) if summary.signum else EXIT_INTERRUPTED)
+
+
+@app.command("collect")
+def collect_command(
+    ctx: typer.Context,
+    hours: float = typer.Option(..., "--hours", help="How long to collect (hours, > 0; e.g. 0.5)."),
+    workers: int | None = typer.Option(
+        None, "--workers", help="Simulation processes (default: the machine's CPU cores)."
+    ),
+    seed: int | None = seed_option(None, "Seed of every random choice (default: random, stored)."),
+    batch_size: int = typer.Option(
+        20, "--batch-size", help="Kept transitions per committed batch (also ~2 s)."
+    ),
+    max_cross: int = typer.Option(
+        MAX_CROSSINGS, "--max-cross", help="Keep transitions up to this many crossings."
+    ),
+    cross_bias: float = typer.Option(
+        1.0,
+        "--cross-bias",
+        help="D_Q bias: start crossing count c weighs (1+c)**bias (0: uniform over counts).",
+    ),
+    max_kept: int | None = typer.Option(
+        None, "--max-kept", help="Also stop after this many kept transitions."
+    ),
+    max_tries: int | None = typer.Option(None, "--max-tries", help="Also stop after this many tried curves."),
+    friction_scale: float = typer.Option(1.0, "--friction-scale", help="Rope friction factor (1 = nominal)."),
+    across_share: float = typer.Option(
+        0.8,
+        "--across-share",
+        help="Share of curves aimed across another strand (the rest uniform; 0: all uniform).",
+    ),
+    remove_share: float = typer.Option(
+        0.0,
+        "--remove-share",
+        help="Also keep a transition that removes crossings, with this probability (0: only those that "
+        "add crossings, the paper's D_Q); see docs/untie.md.",
+    ),
+    use_ray: bool = typer.Option(
+        False, "--ray", help="Run the workers on a Ray cluster (default --workers: its CPUs); see ADDRESS."
+    ),
+    ray_address: str | None = ray_address_argument(),
+) -> None:
+    """Collect transitions that add crossings (D_Q reset scheme) into the database, resumably.
+
+    Running it again continues from the configurations already in the database. Ctrl-C or SIGTERM
+    stops cleanly (the last batch is committed and the run marked interrupted).
+    """
+    from twisted.collect import CollectError, CollectOptions
+    from twisted.distributed import DistributedError, import_ray, resolve_address
+    from twisted.runtime import cpu_cores
+
+    if not use_ray:
+        check_workers(workers)
+    elif workers is not None and not 1 <= workers <= MAX_RAY_WORKERS:
+        fail(f"--workers {workers}: give 1 to {MAX_RAY_WORKERS} Ray workers", EXIT_BAD_INPUT)
+    try:  # Ray problems first, before any database is created
+        address = resolve_address(use_ray, ray_address)
+        if use_ray:
+            import_ray()
+    except DistributedError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+
+    options = CollectOptions(
+        hours=hours,
+        workers=cpu_cores() if workers is None else workers,
+        seed=seed,
+        batch_size=batch_size,
+        max_cross=max_cross,
+        cross_bias=cross_bias,
+        max_kept=max_kept,
+        max_tries=max_tries,
+        friction_scale=friction_scale,
+        across_share=across_share,
+        remove_share=remove_share,
+    )
+    try:
+        options.validate()
+    except CollectError as exc:
+        fail(str(exc), EXIT_BAD_INPUT)
+    summary = _collect_shown(open_db(ctx), options, use_ray, address, workers)
+    _report(summary)
 
 
 @app.command("stats")

@@ -13,6 +13,22 @@ from cli.app import app, console, err_console, fail, open_db, seed_option, unwri
 from cli.commands_problems import problems_app
 from cli.options import parse_device
 
+Draw = Annotated[
+    list[str] | None,
+    typer.Option("--draw", help="Training-goal distributions, taken in turn: u4, u5, u6 (default u4 u5)."),
+]
+Goalsets = Annotated[
+    Path | None,
+    typer.Option(
+        "--goalsets",
+        help="Goal-set files; final-, eval-, tune-*.json are evaluation goals (default: the project's "
+        "goalsets/, wherever the command runs).",
+    ),
+]
+Device = Annotated[
+    str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="Fine-tune on cpu or cuda.")
+]
+
 
 @app.command("improve")
 def improve_command(
@@ -23,12 +39,7 @@ def improve_command(
     seed: int = seed_option(0, "Seed of the training goals, the searches and the training."),
     generations: int = typer.Option(3, "--generations", help="Generations after generation 0."),
     goals: int = typer.Option(8, "--goals", help="Training goals per generation."),
-    draw: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--draw", help="Training-goal distributions, taken in turn: u4, u5, u6 (default u4 u5)."
-        ),
-    ] = None,
+    draw: Draw = None,
     train_set: str | None = typer.Option(
         None, "--train-set", help="A stored set as the training goals (never an evaluation set)."
     ),
@@ -49,20 +60,11 @@ def improve_command(
     init_model: int | None = typer.Option(
         None, "--init-model", help="Generation 0's model (default: the shipped model, stored as 'shipped')."
     ),
-    goalsets: Annotated[
-        Path | None,
-        typer.Option(
-            "--goalsets",
-            help="Goal-set files; final-, eval-, tune-*.json are evaluation goals (default: the project's "
-            "goalsets/, wherever the command runs).",
-        ),
-    ] = None,
+    goalsets: Goalsets = None,
     parallel: int = typer.Option(
         1, "--parallel", help="Searches at once, each its own process on one core (training and tuning)."
     ),
-    device: Annotated[
-        str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="Fine-tune on cpu or cuda.")
-    ] = "cpu",
+    device: Device = "cpu",
 ) -> None:
     """Expert iteration: plan toward drawn training goals, fine-tune on the trees, score on a tuning set;
     each generation is a row of improve_generations (`twisted improve-status`)."""

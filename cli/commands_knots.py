@@ -17,34 +17,15 @@ knots_app = subcommands(
     "agree; otherwise it is a knotoid).",
 )
 
-def _visits(ctx: typer.Context, keys: list[str]) -> dict[str, int] | None:
-    """Configurations per state key from the database, or None when there is no database to read."""
+def _store(ctx: typer.Context) -> Any | None:
+    """The database to count visits in (read only), or None when there is none (a note says so)."""
     from twisted.store import StoreError, open_store
-    from twisted.store.knots import configurations_per_state
 
     try:
-        store = open_store(db_url(ctx), create=False, readonly=True)
+        return open_store(db_url(ctx), create=False, readonly=True)
     except StoreError as exc:
         err_console.print(f"note: no visit counts ({exc})", highlight=False)
         return None
-    with store, store.session() as session:
-        return configurations_per_state(session, keys)
-
-
-def list_name(knot_type: str) -> str:
-    """The name ``knots list`` shows: the common name with its chirality where one stands for exactly this
-    type (``overhand+``, ``figure-eight``, ``square``), else the table type (``6_2+``)."""
-    from twisted.knots import COMMON_NAMES, KNOT_NAMES, knotinfo_name
-
-    for name in ("granny+", "granny-", "square"):
-        if KNOT_NAMES[name] == {knot_type}:
-            return name
-    bare = knotinfo_name(knot_type)
-    if knot_type == "0_1":
-        return "unknot"
-    if "#" in knot_type or bare not in COMMON_NAMES:
-        return knot_type
-    return COMMON_NAMES[bare][0] + knot_type[len(bare) :]
 
 
 @knots_app.command("list")
@@ -63,21 +44,17 @@ def list_command(
         "~1 min).",
     ),
     limit: int = typer.Option(10, "--limit", help="States shown per knot, most visited first (0: all)."),
-    as_json: bool = json_option("everything (all states)"),
+    invariants: bool = typer.Option(
+        False, "--invariants", help="Also a table of each knot's determinant and polynomials."
+    ),
+    as_json: bool = json_option("everything (all states, the invariants)"),
 ) -> None:
     """The knot table (KnotInfo's prime knots up to 7 crossings, each chirality, and the sums of two with at
-    most 7 crossings in all): for each knot its invariants, and the P-data states that really tie it (both
-    closures are the knot) at its crossing number, with how often the data in --db visited each
-    (configurations reached in that state)."""
-    from twisted.knots import (
-        CATALOGUE,
-        COMPOSITE_NOTE,
-        MAX_BUILT_CROSSINGS,
-        MAX_ENUMERATED_CROSSINGS,
-        crossing_number,
-        knotinfo_name,
-        states_tying,
-    )
+    most 7 crossings in all): for each knot the P-data states that really tie it (both closures are the
+    knot) at its crossing number, and how often the data in --db visited each: the configurations
+    collected in that state and the planner tree nodes reached in it (a run's start left out)."""
+    from twisted.knots import MAX_BUILT_CROSSINGS, MAX_ENUMERATED_CROSSINGS
+    from twisted.store.knots import knot_table
 
     if crossings is not None and not 0 <= crossings <= MAX_BUILT_CROSSINGS:
         fail(f"--crossings must be between 0 and {MAX_BUILT_CROSSINGS}, got {crossings}")
@@ -85,81 +62,79 @@ def list_command(
         fail(f"--max-crossings must be between 0 and {MAX_ENUMERATED_CROSSINGS}, got {max_crossings}")
     if limit < 0:
         fail(f"--limit must be >= 0, got {limit}")
-
-    found: dict[str, list[Any] | None] = {}  # None: not enumerated at that count (see --max-crossings)
-    counts: dict[str, int] = {}
-    for knot_type in CATALOGUE:
-        count = crossings if crossings is not None else crossing_number(knot_type)
-        counts[knot_type] = count
-        try:
-            found[knot_type] = states_tying(knot_type, count, max_crossings=max_crossings)
-        except ValueError:
-            found[knot_type] = None
-    visits = _visits(ctx, [p.key for states in found.values() for p in states or ()])
-
-    entries: list[dict[str, Any]] = []
-    for knot_type, k in CATALOGUE.items():
-        listed = found[knot_type]
-        states = sorted(listed or [], key=lambda p: (-(visits or {}).get(p.key, 0), p.key))
-        entries.append(
-            {
-                "name": list_name(knot_type),
-                "knot_type": knot_type,
-                "knotinfo": knotinfo_name(knot_type),
-                "alexander": k.alexander_text(),
-                "determinant": k.determinant,
-                "jones": k.jones_text(),
-                "crossing_number": crossing_number(knot_type),
-                "crossings": counts[knot_type],
-                "listed": listed is not None,
-                "states": [
-                    {"p_data": p.to_list(), "configurations": None if visits is None else visits[p.key]}
-                    for p in states
-                ],
-                "visited_states": None if visits is None else sum(visits[p.key] > 0 for p in states),
-                "configurations": None if visits is None else sum(visits[p.key] for p in states),
-            }
-        )
+    store = _store(ctx)
+    try:
+        entries = knot_table(store, crossings, max_crossings)
+    finally:
+        if store is not None:
+            store.close()
     if as_json:
         print_json(entries)
         return
+    console.print(_summary(entries))
+    if invariants:
+        console.print(_invariants(entries))
+    for e in entries:
+        if e["states"]:
+            console.print(_states(e, limit))
 
+
+def _count(value: int | None) -> str:
+    return "-" if value is None else str(value)
+
+
+def _summary(entries: list[dict[str, Any]]) -> Table:
+    """One row per knot: names, crossings, states, visited states and visits."""
+    from twisted.knots import COMPOSITE_NOTE
+
+    unlisted = [e["crossings"] for e in entries if not e["listed"]]
+    notes = [f"?: not enumerated (--max-crossings {max(unlisted)})."] if unlisted else []
     summary = Table(
-        title="The knot table (KnotInfo): states whose closures under AND over the table are the knot "
-        "(knotoids excluded)",
-        caption=f"Note: {COMPOSITE_NOTE} (docs/knots.md).",
+        title="The knot table (KnotInfo): states whose closures under and over the table are the knot",
+        caption=" ".join([*notes, f"Note: {COMPOSITE_NOTE} (docs/knots.md)."]),
     )
-    for column in ("name", "type", "Alexander", "det", "Jones", "crossings", "states", "visited", "configs"):
-        summary.add_column(column, justify="right" if column in ("det", "crossings", "states") else "left")
+    summary.add_column("name", no_wrap=True)
+    summary.add_column("type", no_wrap=True)
+    for column in ("crossings", "states", "visited", "visits"):
+        summary.add_column(column, justify="right", no_wrap=True)
     for e in entries:
         summary.add_row(
             e["name"],
             e["knot_type"],
-            e["alexander"],
-            str(e["determinant"]),
-            e["jones"],
             str(e["crossings"]),
-            str(len(e["states"])) if e["listed"] else f"? (--max-crossings {e['crossings']})",
-            "-" if e["visited_states"] is None else str(e["visited_states"]),
-            "-" if e["configurations"] is None else str(e["configurations"]),
+            str(len(e["states"])) if e["listed"] else "?",
+            _count(e["visited_states"]),
+            _count(e["visits"]),
         )
-    console.print(summary)
+    return summary
+
+
+def _invariants(entries: list[dict[str, Any]]) -> Table:
+    """One row per knot: its name, determinant and Alexander and Jones polynomials."""
+    table = Table(title="The knots' invariants")
+    table.add_column("name", no_wrap=True)
+    table.add_column("det", justify="right", no_wrap=True)
+    table.add_column("Alexander", overflow="fold")
+    table.add_column("Jones", overflow="fold")
     for e in entries:
-        if not e["states"]:
-            continue
-        shown = e["states"] if limit == 0 else e["states"][:limit]
-        title = f"{e['name']} ({e['knot_type']}): {len(e['states'])} states of {e['crossings']} crossings"
-        table = Table(title=title)
-        table.add_column("P-data", overflow="fold")
-        table.add_column("configurations", justify="right")
-        for s in shown:
-            table.add_row(
-                json.dumps(s["p_data"], separators=(",", ":")),
-                "-" if s["configurations"] is None else str(s["configurations"]),
-            )
-        if len(shown) < len(e["states"]):
-            table.caption = f"{len(e['states']) - len(shown)} more (--limit 0 shows all)"
-        console.print(table)
+        table.add_row(e["name"], str(e["determinant"]), e["alexander"], e["jones"])
+    return table
+
+
+def _states(e: dict[str, Any], limit: int) -> Table:
+    """A knot's states, most visited first: P-data, configurations, planner nodes."""
+    shown = e["states"] if limit == 0 else e["states"][:limit]
+    title = f"{e['name']} ({e['knot_type']}): {len(e['states'])} states of {e['crossings']} crossings"
+    table = Table(title=title)
+    table.add_column("P-data", overflow="fold")
+    table.add_column("configurations", justify="right", no_wrap=True)
+    table.add_column("nodes", justify="right", no_wrap=True)
+    for s in shown:
+        p_data = json.dumps(s["p_data"], separators=(",", ":"))
+        table.add_row(p_data, _count(s["configurations"]), _count(s["nodes"]))
+    if len(shown) < len(e["states"]):
+        table.caption = f"{len(e['states']) - len(shown)} more (--limit 0 shows all)"
+    return table
 
 
 @knots_app.command("identify")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -27,6 +27,23 @@ def _output_file(option: str, path: Path, suffix: str) -> Path:
     if problem is not None:
         fail(f"{option} {path}: {problem}")
     return path
+
+
+def _render_tightened(store: Any, run: int, png: Path) -> Any:
+    """``render --run --tightened``: the run's final rope beside it pulled tight (the pull test of
+    ``twisted replay --tighten`` run first when none is stored)."""
+    from twisted.planner import PlanInputError, replay
+    from twisted.render import render_tightened
+    from twisted.store.knots import tightenings
+
+    with store.session() as session:
+        stored = any(t.ok for t in tightenings(session, run))
+    if not stored:
+        try:
+            replay(store, run, tighten=True)
+        except PlanInputError as exc:
+            fail(str(exc))
+    return render_tightened(store, run, png)
 
 
 @app.command("render")
@@ -54,7 +71,7 @@ def render_command(
     ),
 ) -> None:
     """Draw a configuration, a run's plan or a goal state (look before you read)."""
-    from twisted.render import RenderError, render_configuration, render_goal, render_run, render_tightened
+    from twisted.render import RenderError, render_configuration, render_goal, render_run
     from twisted.topology import PDataError
 
     chosen = [
@@ -90,17 +107,7 @@ def render_command(
             if config is not None:
                 rendered = render_configuration(store, config, png, gl=gl)
             elif run is not None and tightened:
-                from twisted.planner import PlanInputError, replay
-                from twisted.store.knots import tightenings
-
-                with store.session() as session:
-                    stored = any(t.ok for t in tightenings(session, run))
-                if not stored:
-                    try:
-                        replay(store, run, tighten=True)
-                    except PlanInputError as exc:
-                        fail(str(exc))
-                rendered = render_tightened(store, run, png)
+                rendered = _render_tightened(store, run, png)
             elif run is not None:
                 rendered = render_run(store, run, png, gif_path, gl=gl)
             else:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -25,32 +25,103 @@ def _rate(counts: dict[int, tuple[int, int]]) -> str:
     )
 
 
+Goals = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--goal", help="A goal P-data state (repeatable); default: every state of --goal-crossings."
+    ),
+]
+GoalCrossings = Annotated[
+    CrossingCounts | None,
+    typer.Option(
+        "--goal-crossings",
+        parser=parse_crossing_counts,
+        metavar="COUNTS",
+        show_default="1,2,3",  # SacConfig's (twisted.rl is imported when the command runs: torch)
+        help="Crossing counts of default goals.",
+    ),
+]
+
+
+def _check_goals(config: Any) -> None:
+    """Exit 2 when the goals given name no state (before the database is opened)."""
+    from twisted.envs import GoalError, goal_pool
+
+    try:
+        goal_pool(
+            config.goals,
+            knot=config.knot,
+            knot_crossings=config.knot_crossings,
+            goal_crossings=config.goal_crossings,
+        )
+    except GoalError as exc:
+        fail(str(exc))
+
+
+def _train_shown(
+    store: Any, config: Any, resume: int | None, steps: int, minutes: float | None, replay_buffer: bool
+) -> Any:
+    """Train (or continue run ``resume``) with a progress bar and a success row per interval; the outcome."""
+    from twisted.envs import GoalError
+    from twisted.rl import train_sac
+
+    columns = (
+        TextColumn("[bold]run {task.fields[run]}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total} steps"),
+        TextColumn("{task.fields[episodes]} episodes"),
+        TimeElapsedColumn(),
+    )
+    with Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task("rl", total=steps, run="-", episodes=0)
+
+        def on_progress(p) -> None:  # noqa: ANN001 - RlProgress
+            bar.update(task, total=p.total_steps, completed=p.steps, run=p.run_id, episodes=p.episodes)
+            bar.console.print(f"{p.steps:7d} steps  success during the interval: {_rate(p.interval) or '-'}")
+
+        try:
+            outcome = train_sac(
+                store,
+                config,
+                resume_run_id=resume,
+                progress=on_progress,
+                time_limit_s=None if minutes is None else 60.0 * minutes,
+                read_replay_buffer=replay_buffer,
+            )
+        except (GoalError, ValueError) as exc:
+            fail(str(exc), EXIT_BAD_INPUT)
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM
+            from twisted import runtime
+
+            console.print("interrupted: checkpoint saved; continue with `twisted rl train --resume RUN`")
+            raise typer.Exit(runtime.exit_code(exc) or 130) from None
+    return outcome
+
+
+def _report(outcome: Any) -> None:
+    """What an RL training run did, and its policy."""
+    console.print(
+        f"run {outcome.run_id} {outcome.status}: {outcome.steps} steps, {outcome.episodes} episodes, "
+        f"{outcome.elapsed_s:.0f} s; policy {outcome.checkpoint_id} (`twisted plan --planner sac --model "
+        f"{outcome.checkpoint_id}`)"
+    )
+    console.print(f"success of the training episodes per goal crossings: {_rate(outcome.success) or '-'}")
+    if outcome.status != "finished":
+        console.print(f"continue with `twisted rl train --resume {outcome.run_id}`")
+
+
 @rl_app.command("train")
 def train_command(
     ctx: typer.Context,
     steps: int = typer.Option(20_000, "--steps", min=1, help="Environment steps (curves) in all."),
     seed: int = seed_option(0, "Seed of goals, exploration and weights."),
-    goal: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--goal", help="A goal P-data state (repeatable); default: every state of --goal-crossings."
-        ),
-    ] = None,
+    goal: Goals = None,
     problem_set: str | None = typer.Option(None, "--problem-set", help="Goals of a stored problem set."),
     knot: str | None = typer.Option(None, "--knot", help="Goals: the states that tie this knot."),
     knot_crossings: int | None = typer.Option(
         None, "--knot-crossings", min=1, help="Crossings of --knot states."
     ),
-    goal_crossings: Annotated[
-        CrossingCounts | None,
-        typer.Option(
-            "--goal-crossings",
-            parser=parse_crossing_counts,
-            metavar="COUNTS",
-            show_default="1,2,3",  # SacConfig's (twisted.rl is imported when the command runs: torch)
-            help="Crossing counts of default goals.",
-        ),
-    ] = None,
+    goal_crossings: GoalCrossings = None,
     max_curves: int = typer.Option(
         10, "--max-curves", min=1, max=10_000, help="Curves per episode (truncation)."
     ),
@@ -83,12 +154,11 @@ def train_command(
     try:
         import torch
 
-        from twisted.rl import SacConfig, require_rl, train_sac
+        from twisted.rl import SacConfig, require_rl
 
         require_rl()
     except ImportError as exc:
         fail(str(exc))
-    from twisted.envs import GoalError, goal_pool
 
     torch.set_num_threads(threads)
     config = SacConfig(
@@ -110,55 +180,12 @@ def train_command(
         config = dataclasses.replace(config, goal_crossings=tuple(goal_crossings))
     given = goal or knot or goal_crossings is not None
     if given and resume is None and problem_set is None:  # the goals given, before the database is opened
-        try:
-            goal_pool(
-                config.goals,
-                knot=knot,
-                knot_crossings=knot_crossings,
-                goal_crossings=config.goal_crossings,
-            )
-        except GoalError as exc:
-            fail(str(exc))
+        _check_goals(config)
     needs = f"--resume {resume}" if resume is not None else problem_set and f"--problem-set {problem_set}"
     store = open_db(ctx, needed_by=needs or None)
-    columns = (
-        TextColumn("[bold]run {task.fields[run]}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total} steps"),
-        TextColumn("{task.fields[episodes]} episodes"),
-        TimeElapsedColumn(),
-    )
-    with Progress(*columns, console=console, transient=False) as bar:
-        task = bar.add_task("rl", total=steps, run="-", episodes=0)
-
-        def on_progress(p) -> None:  # noqa: ANN001 - RlProgress
-            bar.update(task, total=p.total_steps, completed=p.steps, run=p.run_id, episodes=p.episodes)
-            bar.console.print(f"{p.steps:7d} steps  success during the interval: {_rate(p.interval) or '-'}")
-
-        try:
-            outcome = train_sac(
-                store,
-                None if resume is not None else config,
-                resume_run_id=resume,
-                progress=on_progress,
-                time_limit_s=None if minutes is None else 60.0 * minutes,
-                read_replay_buffer=replay_buffer,
-            )
-        except (GoalError, ValueError) as exc:
-            fail(str(exc), EXIT_BAD_INPUT)
-        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM
-            from twisted import runtime
-
-            console.print("interrupted: checkpoint saved; continue with `twisted rl train --resume RUN`")
-            raise typer.Exit(runtime.exit_code(exc) or 130) from None
-    console.print(
-        f"run {outcome.run_id} {outcome.status}: {outcome.steps} steps, {outcome.episodes} episodes, "
-        f"{outcome.elapsed_s:.0f} s; policy {outcome.checkpoint_id} (`twisted plan --planner sac --model "
-        f"{outcome.checkpoint_id}`)"
-    )
-    console.print(f"success of the training episodes per goal crossings: {_rate(outcome.success) or '-'}")
-    if outcome.status != "finished":
-        console.print(f"continue with `twisted rl train --resume {outcome.run_id}`")
+    given_config = None if resume is not None else config  # a resumed run keeps its own settings
+    outcome = _train_shown(store, given_config, resume, steps, minutes, replay_buffer)
+    _report(outcome)
 
 
 @rl_app.command("list")

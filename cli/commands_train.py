@@ -46,6 +46,68 @@ def _by_source(metrics: dict[str, Any], sides: str = "train,val") -> str:
     return ", ".join(parts) or "-"
 
 
+Device = Annotated[str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="cpu or cuda.")]
+LinkHeadOption = Annotated[
+    LinkHead, typer.Option("--link-head", help="pointer (shared per-link scorer) or dense.")
+]
+SourcesOption = Annotated[
+    Sources,
+    typer.Option(
+        "--from",
+        parser=parse_sources,
+        metavar="SOURCES",
+        help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
+    ),
+]
+HoldOutSets = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--hold-out-set",
+        metavar="SET",
+        help="Leave out what would show the model this problem set's goals (the sets it is then "
+        "evaluated on): the planner trees of runs towards them, and every transition or tree edge "
+        "that reaches one of their states; repeatable.",
+    ),
+]
+InitModel = Annotated[
+    int | None,
+    typer.Option(
+        "--init-model",
+        min=1,
+        metavar="MODEL_ID",
+        help="Fine-tune: start from this stored model's weights and architecture (`twisted models`; "
+        "`models --import` stores a file such as the shipped default).",
+    ),
+]
+
+Threads = Annotated[
+    int | None,
+    typer.Option(
+        "--threads",
+        min=1,
+        max=1024,
+        help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
+    ),
+]
+Removing = Annotated[
+    bool,
+    typer.Option(
+        "--removing/--no-removing",
+        help="Also train on the collected transitions that remove crossings (`collect --remove-share`), "
+        "each conditioned on its removing move.",
+    ),
+]
+
+
+def _check_fine_tuning(ctx: typer.Context, resume: bool) -> None:
+    """``--init-model``: a new run (no --resume) whose architecture is the model's (no --hidden, ...)."""
+    if resume:
+        fail("--init-model starts a new training run: it cannot go with --resume")
+    given = [NET_OPTIONS[name] for name in NET_OPTIONS if _given(ctx, name)]
+    if given:
+        fail(f"{', '.join(given)}: the architecture of a fine-tuning run is --init-model's; leave these out")
+
+
 @app.command("train")
 def train_command(
     ctx: typer.Context,
@@ -55,9 +117,7 @@ def train_command(
     hours: float | None = typer.Option(
         None, "--hours", min=0.0, help="Stop (and store the model) after this time."
     ),
-    device: Annotated[
-        str, typer.Option("--device", parser=parse_device, metavar="DEVICE", help="cpu or cuda.")
-    ] = DEVICES[0],
+    device: Device = DEVICES[0],
     resume: bool = typer.Option(False, "--resume", help="Continue the newest unfinished training run."),
     seed: int = seed_option(TrainConfig.seed, "Seed of the split, batch order, augmentation and weights."),
     batch_size: int = typer.Option(TrainConfig.batch_size, "--batch-size", min=1, max=1_000_000),
@@ -74,9 +134,7 @@ def train_command(
     components: int = typer.Option(
         NetConfig.components, "--components", min=1, max=256, help="Gaussians per continuous head."
     ),
-    link_head: Annotated[
-        LinkHead, typer.Option("--link-head", help="pointer (shared per-link scorer) or dense.")
-    ] = DEFAULT_LINK_HEAD,
+    link_head: LinkHeadOption = DEFAULT_LINK_HEAD,
     new_visits: bool = typer.Option(
         NetConfig.new_visits,
         "--new-visits/--no-new-visits",
@@ -87,64 +145,22 @@ def train_command(
         "--move/--no-move",
         help="Condition on the abstract move (R1/R2/Cross, segments, sides).",
     ),
-    sources: Annotated[
-        Sources,
-        typer.Option(
-            "--from",
-            parser=parse_sources,
-            metavar="SOURCES",
-            help="Samples: collect (collected transitions), search (planner tree edges), or collect,search.",
-        ),
-    ] = DEFAULT_SOURCES,
-    hold_out_sets: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--hold-out-set",
-            metavar="SET",
-            help="Leave out what would show the model this problem set's goals (the sets it is then "
-            "evaluated on): the planner trees of runs towards them, and every transition or tree edge "
-            "that reaches one of their states; repeatable.",
-        ),
-    ] = None,
-    removing: bool = typer.Option(
-        TrainConfig.removing,
-        "--removing/--no-removing",
-        help="Also train on the collected transitions that remove crossings (`collect --remove-share`), "
-        "each conditioned on its removing move.",
-    ),
+    sources: SourcesOption = DEFAULT_SOURCES,
+    hold_out_sets: HoldOutSets = None,
+    removing: Removing = TrainConfig.removing,
     val_fraction: float = typer.Option(TrainConfig.val_fraction, "--val-fraction", min=0.0, max=0.9),
     augment: bool = typer.Option(
         TrainConfig.augment, "--augment/--no-augment", help="Mirror/Reverse augmentation."
     ),
-    threads: int | None = typer.Option(
-        None,
-        "--threads",
-        min=1,
-        max=1024,
-        help="torch CPU threads (default: torch's choice; 1 is best on a busy machine).",
-    ),
+    threads: Threads = None,
     checkpoint_every_s: float = typer.Option(
         TrainConfig.checkpoint_every_s, "--checkpoint-every", min=1.0, help="Seconds between checkpoints."
     ),
-    init_model: int | None = typer.Option(
-        None,
-        "--init-model",
-        min=1,
-        metavar="MODEL_ID",
-        help="Fine-tune: start from this stored model's weights and architecture (`twisted models`; "
-        "`models --import` stores a file such as the shipped default).",
-    ),
+    init_model: InitModel = None,
 ) -> None:
     """Train the inverse model on the collected transitions; checkpoints go to the database."""
     if init_model is not None:
-        if resume:
-            fail("--init-model starts a new training run: it cannot go with --resume")
-        given = [NET_OPTIONS[name] for name in NET_OPTIONS if _given(ctx, name)]
-        if given:
-            fail(
-                f"{', '.join(given)}: the architecture of a fine-tuning run is --init-model's; "
-                "leave these out"
-            )
+        _check_fine_tuning(ctx, resume)
     config = TrainConfig(
         epochs=epochs,
         hours=hours,
@@ -303,7 +319,7 @@ def models_command(
     as_json: bool = json_option("the models"),
 ) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
-    from twisted.model.registry import ModelError, default_model_path, list_models, load_model
+    from twisted.model.registry import default_model_path, list_models
 
     if export is not None:
         if import_file is not None:
@@ -318,18 +334,7 @@ def models_command(
         fail("--name names an imported model: give --import FILE too")
     store = open_db(ctx, readonly=True, needed_by=None if model_id is None else f"--id {model_id}")
     if export is not None:
-        try:
-            model = load_model(store, model_id)
-        except ModelError as exc:
-            fail(str(exc))
-        if model.model_id is None:
-            fail("the database holds no model to export: train one with `twisted train`")
-        target = Path(export)
-        try:
-            target.write_bytes(model.to_bytes())
-        except OSError as exc:
-            fail(f"--export {export}: cannot be written ({exc.strerror or exc})")
-        console.print(f"model {model.model_id} written to {target} ({target.stat().st_size / 1e6:.1f} MB)")
+        _export_model(store, model_id, Path(export))
         return
     models = list_models(store)
     if as_json:
@@ -340,6 +345,28 @@ def models_command(
         shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"
         console.print(f"no models in the database; planning uses {shipped}")
         return
+    _print_models(store, models)
+
+
+def _export_model(store: Any, model_id: int | None, target: Path) -> None:
+    """``models --export``: write a stored model (the newest, or ``model_id``) to ``target``."""
+    from twisted.model.registry import ModelError, load_model
+
+    try:
+        model = load_model(store, model_id)
+    except ModelError as exc:
+        fail(str(exc))
+    if model.model_id is None:
+        fail("the database holds no model to export: train one with `twisted train`")
+    try:
+        target.write_bytes(model.to_bytes())
+    except OSError as exc:
+        fail(f"--export {target}: cannot be written ({exc.strerror or exc})")
+    console.print(f"model {model.model_id} written to {target} ({target.stat().st_size / 1e6:.1f} MB)")
+
+
+def _print_models(store: Any, models: list[Any]) -> None:
+    """The stored models as a table (with the improve generation each one is)."""
     from twisted.store.improve import lineage_labels
 
     with store.session() as session:

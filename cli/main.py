@@ -37,7 +37,10 @@ except BaseException as exc:  # a signal during the imports (they may wrap it, e
 
 
 def run() -> None:
-    app()
+    try:
+        app()
+    finally:  # the command has ended: a signal no longer changes its exit code (DESIGN 13)
+        runtime.ignore_while_exiting()
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ from twisted.planner.options import OptionSpec, result_options, specs
 F = TypeVar("F", bound=Callable[..., Any])
 
 MAX_SEEDS = 10_000  # planner seeds per goal in one evaluation
+PLANNER_PANEL = "Search options"  # the help panel of the planner's options (with_planner_options)
 
 # mypy cannot see members made from a tuple; the members are the tuple's strings (Planner("sac")).
 # The planner options' choices come from their declaration (PlannerOptions).
@@ -142,11 +143,12 @@ def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
     shown = f"{spec.default:g}" if isinstance(spec.default, float) else str(spec.default)
     help = spec.help if spec.type is bool else spec.help.rstrip(".") + f" (default {shown})."
     if spec.type is bool and spec.default:  # on unless --no-NAME: a pair of flags, None when neither
-        pair = typer.Option(None, f"{spec.flag}/--no-{spec.flag[2:]}", help=help)
+        flags = f"{spec.flag}/--no-{spec.flag[2:]}"
+        pair = typer.Option(None, flags, help=help, rich_help_panel=PLANNER_PANEL)
         kind = inspect.Parameter.KEYWORD_ONLY
         return inspect.Parameter(spec.name, kind, default=pair, annotation=bool | None)
     if spec.type is bool:
-        flag = typer.Option(False, spec.flag, help=help)
+        flag = typer.Option(False, spec.flag, help=help, rich_help_panel=PLANNER_PANEL)
         return inspect.Parameter(spec.name, inspect.Parameter.KEYWORD_ONLY, default=flag, annotation=bool)
     annotation: Any = CHOICES[spec.name] if spec.choices else spec.type
 
@@ -156,7 +158,11 @@ def _planner_parameter(spec: OptionSpec) -> inspect.Parameter:
             raise _bad(f"{spec.flag} {value}: {problem}")
         return value
 
-    option = typer.Option(None, spec.flag, callback=check, help=help)
+    # a choice is named by its option (the help lists the values): a list of them would be cut mid-word
+    metavar = spec.name.upper() if spec.choices else None
+    option = typer.Option(
+        None, spec.flag, callback=check, help=help, metavar=metavar, rich_help_panel=PLANNER_PANEL
+    )
     return inspect.Parameter(
         spec.name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=annotation | None
     )
@@ -200,9 +206,9 @@ def result_flags() -> str:
     return ", ".join("--" + name.replace("_", "-") for name in result_options())
 
 
-def json_option(what: str) -> Any:
-    """The ``--json`` option of every command that lists or reports something."""
-    return typer.Option(False, "--json", help=f"Print {what} as JSON.")
+def json_option(what: str, panel: str | None = None) -> Any:
+    """The ``--json`` option of every command that lists or reports something (``panel``: its help panel)."""
+    return typer.Option(False, "--json", help=f"Print {what} as JSON.", rich_help_panel=panel)
 
 
 def print_json(data: Any, *, indent: int | None = 2) -> None:

@@ -250,3 +250,21 @@ def test_train_logs_its_parameters_and_each_epoch(tmp_path: Path) -> None:
     assert "training run 1 started on cpu" in text and "'epochs': 2" in text
     assert "epoch 1/2" in text and "epoch 2/2" in text
     assert "training run 1 finished after 2 epochs" in text and "model 1 stored" in text
+
+
+def test_help_reads_as_prose_flags_take_no_placeholder_and_plan_groups_its_options() -> None:
+    """Typer keeps the line breaks of a docstring's later paragraphs (sentences cut mid-line) and shows
+    `<bool>` for every flag; plan's 30 options sat in one list."""
+    import typer
+
+    from cli.app import readable_help
+
+    root = typer.main.get_command(app)
+    readable_help(root)  # as every run of the CLI does
+    plan = root.get_command(None, "plan")  # type: ignore[attr-defined]
+    code, out = _cli("plan", "--help")
+    assert code == 0 and "<bool>" not in out and "…" not in out
+    assert all("\n" not in paragraph for paragraph in plan.help.split("\n\n"))
+    panels = ("Goal", "Start or resume", "Budget and workers", "Output", "Search options", "Global options")
+    for panel in panels:
+        assert f" {panel} " in out, panel

@@ -6,6 +6,7 @@ every run here is the same run each time.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import signal
@@ -520,3 +521,55 @@ def test_start_config_is_the_root_of_the_tree(tmp_path: Path) -> None:
         info = load_run(store, json.loads(out)["run_id"])
         assert info is not None and info.start_configuration_id == config_id
         assert np.array_equal(info.nodes[0].q, moved.state)
+
+
+# --- one call runs a search ------------------------------------------------------------------------------
+
+
+def test_run_search_opens_nothing_for_a_bad_goal_and_its_result_serialises_itself(tmp_path: Path) -> None:
+    """run_search is every caller's one call: a bad goal is refused before the store is opened (so no
+    database is created), and a search's result is its own JSON (what `plan --json` prints)."""
+    from twisted.planner import SearchProgress, SearchRequest, run_search
+
+    url = _db(tmp_path)
+    opened: list[bool] = []
+
+    def opener(*, create: bool) -> Any:
+        opened.append(create)
+        return open_store(url) if create else None
+
+    with pytest.raises(PlanInputError, match="--goal"):
+        run_search(opener, SearchRequest(goal="[[1,", workers=1))
+    assert opened == [] and not (tmp_path / "plan.db").exists()
+    progress = SearchProgress()
+    options = {"planner": "random-low", "seed": 0}
+    request = SearchRequest(goal=ONE_CROSSING, options=options, workers=1, timeout_s=600, timed_setup=False)
+    result = run_search(opener, request, progress=progress)
+    assert opened == [True] and result.solved and progress.search is not None
+    payload = json.loads(json.dumps(result.to_dict()))
+    assert payload["run_id"] == result.run_id == progress.search.run_id and payload["outcome"] == "solved"
+    assert payload["reached_state"] == parse_p_data(ONE_CROSSING).to_list() == payload["plan"][-1]["state"]
+    assert payload["sim_calls"] == sum(payload["sim_calls_by_source"].values())
+
+
+def test_run_search_reuses_the_workers_and_model_it_is_given_and_leaves_them_running(tmp_path: Path) -> None:
+    """Issue 64's replans: searches in a row given one SearchResources start the workers and load the
+    model once; run_search leaves them running (the owner closes them), and starts its own without."""
+    from twisted.planner import SearchProgress, SearchRequest, SearchResources, run_search
+
+    options = {"planner": "twisted", "seed": 0}
+    request = SearchRequest(goal=ONE_CROSSING, options=options, workers=1, timeout_s=600, timed_setup=False)
+    pools, samplers = [], []
+    with open_store(_db(tmp_path)) as store, SearchResources() as resources:
+        for seed in (0, 1):
+            progress = SearchProgress()
+            asked = dataclasses.replace(request, options={**options, "seed": seed})
+            assert run_search(store, asked, progress=progress, resources=resources).solved
+            assert progress.search is not None
+            pools.append(progress.search.pool)
+            samplers.append(progress.search.sampler)
+        # the second search ran on the first one's workers: they were left running
+        assert pools[0] is pools[1] is resources.pool(1, 1.0) and samplers[0] is samplers[1]
+        alone = SearchProgress()
+        assert run_search(store, request, progress=alone).solved and alone.search is not None
+        assert alone.search.pool is not pools[0]

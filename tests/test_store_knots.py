@@ -283,9 +283,10 @@ def test_stats_and_knots_list_show_visits_per_knot(sqlite_url: str) -> None:
     plus = entries["3_1+"]
     assert plus["crossings"] == plus["crossing_number"] == 3 and plus["name"] == "overhand+"
     # the two states that really tie it, the visited one first
-    assert plus["states"][0] == {"p_data": TREFOIL_3_PLUS.to_list(), "configurations": 2}
-    assert len(plus["states"]) == 2 and plus["states"][1]["configurations"] == 0
-    assert plus["visited_states"] == 1 and plus["configurations"] == 2
+    visited = {"p_data": TREFOIL_3_PLUS.to_list(), "configurations": 2, "nodes": 0, "visits": 2}
+    assert plus["states"][0] == visited
+    assert len(plus["states"]) == 2 and plus["states"][1]["visits"] == 0
+    assert plus["visited_states"] == 1 and plus["configurations"] == plus["visits"] == 2
     assert entries["3_1-"]["configurations"] == 1 and entries["0_1"]["configurations"] == 1
     assert entries["4_1"]["crossings"] == 4 and len(entries["4_1"]["states"]) == 8
     assert entries["4_1"]["visited_states"] == 0
@@ -335,3 +336,58 @@ def test_knots_identify_command() -> None:
     assert bad.exit_code == 2 and "P_DATA" in bad.output
     bad_list = runner.invoke(app, ["knots", "list", "--crossings", "9"])
     assert bad_list.exit_code == 2 and "--crossings" in bad_list.output
+
+
+def _tree(session, run_id: int, states: list) -> None:
+    """A planner tree: the root (seq 0, the run's start) and then one node per state, a chain."""
+    from twisted.store.search import SearchNode
+
+    parent = None
+    for seq, p in enumerate(states):
+        node = SearchNode(
+            run_id=run_id, seq=seq, parent_id=parent, state_id=get_or_create_state(session, p).id,
+            cross=p.cross, q=array_to_blob(np.zeros(93)), points=array_to_blob(np.zeros((22, 3))),
+            iteration=seq, sim_call=seq, created_s=0.1 * seq,
+        )  # fmt: skip
+        session.add(node)
+        session.flush()
+        parent = node.id
+
+
+def test_knots_list_counts_planner_nodes_as_visits(sqlite_url: str) -> None:
+    """Issue 63 item 7: an overhand just tied by the planner (no configuration collected) is visited."""
+    with open_store(sqlite_url) as store, store.session(write=True) as session:
+        # the root is the start (an overhand given as the start counts no visit), then two nodes tie it
+        _tree(session, start_run(session, "plan", {}).id, [TREFOIL_3_MINUS, ONE, TREFOIL_3_MINUS])
+        _tree(session, start_run(session, "plan", {}).id, [EMPTY, ONE, TREFOIL_3_MINUS])
+        _configuration(session, None, TREFOIL_3_MINUS, 1)
+    listed = runner.invoke(app, ["--db", sqlite_url, "knots", "list", "--json"])
+    assert listed.exit_code == 0, listed.output
+    minus = {e["knot_type"]: e for e in json.loads(listed.stdout)}["3_1-"]
+    assert minus["states"][0] == {
+        "p_data": TREFOIL_3_MINUS.to_list(), "configurations": 1, "nodes": 2, "visits": 3
+    }  # fmt: skip
+    assert minus["visited_states"] == 1 and (minus["nodes"], minus["visits"]) == (2, 3)
+    text_out = runner.invoke(app, ["--db", sqlite_url, "knots", "list", "--limit", "1"])
+    row = next(line for line in text_out.output.splitlines() if "overhand-" in line and "3_1-" in line)
+    assert row.replace("│", " ").split()[-2:] == ["1", "3"], row  # visited states, visits
+
+
+@pytest.mark.parametrize("invariants", [False, True], ids=["plain", "invariants"])
+def test_knots_list_reads_at_80_columns(sqlite_url: str, invariants: bool, monkeypatch) -> None:
+    """Issue 63 item 7: at 80 columns every knot's name and type print whole (rich cut them with "…")."""
+    from cli.app import console
+
+    with open_store(sqlite_url):
+        pass
+    args = ["--db", sqlite_url, "knots", "list", "--limit", "1", *(["--invariants"] if invariants else [])]
+    monkeypatch.setattr(console, "width", 80)  # what COLUMNS=80 gives (read when the console is made)
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert max(len(line) for line in lines) <= 80 and "…" not in result.output
+    rows = {tuple(line.split("│")[1:3]) for line in lines if line.count("│") > 3}
+    names = {(r[0].strip(), r[1].strip()) for r in rows}
+    entries = json.loads(runner.invoke(app, ["--db", sqlite_url, "knots", "list", "--json"]).stdout)
+    assert {(e["name"], e["knot_type"]) for e in entries} <= names
+    assert ("Jones" in result.output) is invariants

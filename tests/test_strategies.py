@@ -34,7 +34,11 @@ from twisted.planner.options import (
 )
 from twisted.planner.strategies import (
     R1_ROOM_FLOOR,
+    AddingMoves,
+    BothWays,
     CrossingStates,
+    LowLevelOnly,
+    PlanGuided,
     PullTest,
     R1Room,
     RandomCurves,
@@ -306,6 +310,55 @@ def test_a_removing_move_and_another_kind_are_never_scripted() -> None:
         ScriptedCross().sample(node, cross.state, curl, 1, np.random.default_rng(0))
     with pytest.raises(ValueError, match="share"):
         StepCurves(_Counting(), share=1.5)
+
+
+def test_a_removing_step_takes_the_removal_proposers_curves_when_one_is_given() -> None:
+    """A both-ways search's ``--removal-curves random``: a removing step's K curves are random curves (the
+    draws RandomCurves makes), an adding step's still the sampler's."""
+    node = _one_crossing_node()
+    cross = next(s for s in successors(node.p_data) if s.move.kind == "Cross")
+    removing = dataclasses.replace(cross.move, remove=True)
+    sampler = _Counting()
+    step = StepCurves(sampler, ScriptedCross(), 1.0, removal=RandomCurves())
+    curves, made = step.propose(node, cross.state, removing, 3, np.random.default_rng(5))
+    assert made == 0 and sampler.asked == 0
+    assert curves == RandomCurves().sample(node, None, None, 3, np.random.default_rng(5))
+    assert step.propose(node, cross.state, cross.move, 3, np.random.default_rng(5))[1] == 3  # adding
+
+
+# --- growth and the iteration ----------------------------------------------------------------------------
+
+
+def test_adding_moves_keep_what_does_not_drop_nor_overshoot_and_both_ways_keep_up_to_the_cap() -> None:
+    one, two, three = parse_p_data(ONE), parse_p_data(TWO), parse_p_data(THREE)
+    goal = state_goal(two)
+    adding = AddingMoves(goal)
+    assert adding.keeps(one, two) and not adding.keeps(two, one) and not adding.keeps(one, three)
+    assert adding.wants_plans(one) and not adding.wants_plans(two)
+    both = BothWays(goal, three)  # untying a 3-crossing rope toward a 2-crossing goal
+    assert both.cross_cap == 3 and both.keeps(three, one) and both.keeps(one, three)
+    assert both.wants_plans(three) and both.wants_plans(EMPTY) and not both.wants_plans(two)
+    assert not BothWays(goal, EMPTY).keeps(one, three)  # the cap: the goal's crossings
+
+
+def test_the_planner_option_picks_the_iteration_part() -> None:
+    goal = check_goal(ONE)
+    baseline = default_parts(PlannerOptions(planner="low-level-only"), goal)
+    assert isinstance(baseline.iteration, LowLevelOnly) and not baseline.iteration.plans
+    for planner in ("twisted", "random-low"):
+        parts = default_parts(PlannerOptions(planner=planner), goal)
+        assert isinstance(parts.iteration, PlanGuided) and parts.iteration.plans
+        assert isinstance(parts.growth, AddingMoves)
+
+
+def test_the_search_loop_tests_no_planner_name_and_keeps_no_kind_table() -> None:
+    """The variants are parts (DESIGN 8): the loop has no branch on the planner's name, and the statistics
+    hold only tables something reads."""
+    from twisted.planner import search
+
+    source = Path(search.__file__).read_text()
+    assert "planner ==" not in source and "planner !=" not in source
+    assert "kind" not in search.STATS_TABLES
 
 
 # --- goal tests ---------------------------------------------------------------------------------------

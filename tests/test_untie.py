@@ -18,7 +18,7 @@ from twisted.collect import CollectOptions, collect
 from twisted.goals import state_goal
 from twisted.moves import plans, plans_both_ways
 from twisted.planner import PlannerOptions, Twisted, curve_sampler, resume_search, start_search
-from twisted.planner.untie import BothWays
+from twisted.planner.strategies import BothWays
 from twisted.runtime import StopSignals
 from twisted.sim import Curve, RopeSim
 from twisted.sim.pool import SimPool
@@ -102,7 +102,7 @@ def test_untie_from_a_3_crossing_end_is_found_and_replays(tied_db: Path, tmp_pat
     assert "reaches the goal []" in replayed.output
     # the run it untied was not changed, and an unsolved one has no end to start from
     again = runner.invoke(app, ["--db", url, "untie", "1", "--resume"])
-    assert again.exit_code == 2 and "already solved" in again.output
+    assert again.exit_code == 2 and "is not an untie run" in again.output
 
 
 def test_an_interrupted_untie_resumes_where_it_stopped(tied_db: Path, tmp_path: Path) -> None:
@@ -114,7 +114,7 @@ def test_an_interrupted_untie_resumes_where_it_stopped(tied_db: Path, tmp_path: 
         for seed in range(4, 24):
             options = PlannerOptions(planner="random-low", seed=seed, k=2, p_expand=0.0)
             whole = start_search(store, state_goal(EMPTY), options, pool, from_run=1)
-            assert isinstance(whole, BothWays)
+            assert isinstance(whole.parts.growth, BothWays)
             done = whole.run(timeout_s=600)
             if done.iterations >= 2:
                 break
@@ -129,7 +129,7 @@ def test_an_interrupted_untie_resumes_where_it_stopped(tied_db: Path, tmp_path: 
         first = cut.run(timeout_s=600)
         assert first.status == "interrupted" and first.iterations == 1
         resumed = resume_search(store, cut.run_id, pool)
-        assert isinstance(resumed, BothWays) and resumed.iteration == 1
+        assert isinstance(resumed.parts.growth, BothWays) and resumed.iteration == 1
         rest = resumed.run(timeout_s=600)
         assert rest.solved and rest.run_id == cut.run_id
         assert rest.sim_calls == done.sim_calls and rest.iterations == done.iterations

@@ -57,6 +57,16 @@ def install() -> None:
         signal.signal(signum, _interrupt)
 
 
+def ignore_while_exiting() -> None:
+    """The command has ended (its exit code chosen, its results stored and printed): SIGINT and SIGTERM
+    are ignored while the interpreter shuts down (a second or two of garbage collection). Python puts
+    the default handlers back as it finalizes, so a Ctrl-C there killed the process (130 in a shell)
+    without a word after it had done everything, a solved run stored as solved (issue 62, item 11)."""
+    if _main_thread():
+        for signum in SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
     """Inside the block SIGTERM raises KeyboardInterrupt like Ctrl-C; the previous handler comes back after.

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -70,6 +71,19 @@ class Tightened:
     def knot_name(self) -> str | None:
         """The knot of the tightened rope (``"knotoid"`` when its closures still differ), None if not ok."""
         return None if self.knot is None else self.knot.name
+
+    def to_dict(self) -> dict[str, Any]:
+        """The pull test as JSON-ready data (``replay --tighten --json``)."""
+        return {
+            "ok": self.ok,
+            "reason": self.reason,
+            "p_data": None if self.p_data is None else self.p_data.to_list(),
+            "knot": None if self.knot is None else self.knot.to_dict(),
+            "knot_type": self.knot_name,
+            "end_distance_m": self.end_distance_m,
+            "sim_seconds": self.sim_seconds,
+            "wall_seconds": self.wall_seconds,
+        }
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,6 +22,9 @@ from twisted.moves import Move, explains
 from twisted.planner.options import PlannerOptions
 from twisted.planner.strategies import StepCurves
 from twisted.planner.tree import Node
+from twisted.proposals import segment_bounds
+from twisted.rope import N_LINKS
+from twisted.store import open_store
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, ProblemSet
 from twisted.store.search import SearchRunInfo, StoredNode, load_run
 from twisted.topology import PData, parse_p_data
@@ -155,3 +158,37 @@ def planner_curves(
     while len(own) < k:
         own += planner.propose(node, nxt, move, PLANNER_K, rng)[0]
     return own[:k]
+
+
+def pairs_from(db: str, sets: list[str], labels: list[str], cross: int) -> list[dict[str, Any]]:
+    """Every (node, next state) pair the runs tried from states of ``cross`` crossings that one move
+    explains, with its node."""
+    with open_store(db) as store:
+        return [
+            {"run": run_id, "node": node, "next": nxt, "move": move, "tried": tried, "reached": reached}
+            for run_id, _, node, nxt, move, tried, reached in stored_pairs(store, sets, labels)
+            if node.p_data.cross == cross and move is not None
+        ]
+
+
+def choose(pairs: list[dict[str, Any]], n: int, rng: np.random.Generator) -> list[dict[str, Any]]:
+    """Up to ``n`` never-reached pairs and ``n`` reached ones, drawn uniformly, in their stored order."""
+    chosen = []
+    for name, group in (
+        ("failed", [p for p in pairs if p["reached"] == 0]),
+        ("reached", [p for p in pairs if p["reached"] > 0]),
+    ):
+        picks = sorted(rng.choice(len(group), size=min(n, len(group)), replace=False)) if group else []
+        chosen += [dict(group[int(i)], group=name) for i in picks]
+    return chosen
+
+
+def segment_link(
+    rng: np.random.Generator, points: Any, segment: int, bounds: np.ndarray | None = None
+) -> int:
+    """A whole link inside P-data ``segment`` of the rope with these link points, uniformly drawn (the
+    middle link when none is); ``bounds``: ``segment_bounds`` of the points, when known."""
+    bounds = segment_bounds(points) if bounds is None else bounds
+    lo, hi = bounds[segment], bounds[segment + 1]
+    inside = [link for link in range(N_LINKS) if lo + 0.3 < link + 0.5 < hi - 0.3]
+    return int(rng.choice(inside)) if inside else int(np.clip((lo + hi) / 2, 0, N_LINKS - 1))

@@ -145,6 +145,16 @@ ORDER BY reached_in, configuration_id, node_id
 {_PAGE}
 """
 
+EPISODE = f"""
+SELECT s.seq, s.kind, s.link, s.z_max_m, s.x_m, s.y_m, s.observed_key AS state, s.expected_key,
+       ROUND(s.drift_m, 3) AS drift_m, s.fault, s.knot, s.replan_run_id, ROUND(s.planning_s, 1) AS planning_s,
+       ROUND(s.elapsed_s, 1) AS elapsed_s, s.points
+FROM episode_steps s
+WHERE s.episode_id = :episode
+ORDER BY s.seq
+{_PAGE}
+"""
+
 _PAGED = f"{PAGE_ROWS} rows a page: give <code>page</code> 2, 3, ... for the next ones."
 
 QUERIES: dict[str, dict[str, Any]] = {
@@ -204,6 +214,15 @@ QUERIES: dict[str, dict[str, Any]] = {
             "<code>topological_states.key</code>). " + _PAGED
         ),
         "sql": STATE_REACHED_BY,
+    },
+    "episode": {
+        "title": "An episode in a world apart from the model, as its observed ropes",
+        "description_html": (
+            "The steps of episode <code>episode</code> (<code>twisted execute</code>, <code>tie</code>): "
+            "each action sent, the rope as the world showed it afterwards, the plan's expected state, "
+            "each replan and pull test. " + _PAGED
+        ),
+        "sql": EPISODE,
     },
 }
 

@@ -376,21 +376,21 @@ class _Search:
 
 
 def _plan(store: Any, job: _Search) -> dict[str, Any]:
-    """One search on one core through the planner's public session API; its outcome as a dict."""
-    from twisted.planner import PlannerOptions, curve_sampler, start_search
-    from twisted.sim import SimPool
+    """One search on one core (:func:`twisted.planner.run_search`, the search time alone timed); its
+    outcome as a dict."""
+    from twisted.planner import SearchRequest, run_search
 
-    sampler, used = curve_sampler(store, "twisted", job.model_id)
-    with SimPool(1) as pool:
-        search = start_search(
-            store,
-            make_goal(job.goal),
-            PlannerOptions(seed=job.seed),
-            pool,
-            sampler=sampler,
-            extra_parameters={"model_id": used, **job.tags},
-        )
-        result = search.run(timeout_s=job.timeout_s, max_iterations=job.iterations)
+    request = SearchRequest(
+        goal=job.goal,
+        options={"planner": "twisted", "seed": job.seed},
+        model_id=job.model_id,
+        workers=1,
+        timeout_s=job.timeout_s,
+        max_iterations=job.iterations,
+        parameters=job.tags,
+        timed_setup=False,
+    )
+    result = run_search(store, request)
     calls_to_solve = result.path[-1].sim_call if result.solved and result.path else None
     return {
         "index": job.index,

@@ -126,10 +126,8 @@ def set_row(store: Any, row_id: int, **values: Any) -> None:
 
 def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
     """Run one (goal, seed) with the planner and store its outcome (in the calling process)."""
-    from twisted.goals import make_goal
-    from twisted.planner import PlannerOptions, curve_sampler, resume_search, start_search
+    from twisted.planner import SearchProgress, run_search
     from twisted.runtime import StopSignals
-    from twisted.sim import SimPool
     from twisted.store import open_store
 
     t0 = time.perf_counter()
@@ -140,36 +138,16 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         if claimed is None:
             return TaskOutcome(task.goal_key, task.seed, "skipped")
         row_id, resume_run_id = claimed
-        from twisted.store.knots import prime_goal_spec
+        request = _request(store, task, resume_run_id)
 
-        prime_goal_spec(store, task.goal_key)  # a 5-crossing knot's states: read from the store, made once
-        goal = make_goal(task.goal_key)
-        option_fields = {k: v for k, v in task.options.items() if k in PlannerOptions.__dataclass_fields__}
-        options = PlannerOptions(**{**option_fields, "planner": task.planner, "seed": task.seed})
+        class RowProgress(SearchProgress):
+            def started(self, search: Any) -> None:  # the row names its planner run from the start
+                assert row_id is not None
+                set_row(store, row_id, plan_run_id=search.run_id)
+
         stop = StopSignals()
-        with stop.installed(), SimPool(task.workers, task.friction_scale) as pool:
-            search = None
-            if resume_run_id is not None:
-                from twisted.store.search import load_run
-
-                info = load_run(store, resume_run_id, with_nodes=False)
-                if info is not None and info.outcome != "solved" and info.checkpoint is not None:
-                    # continue with the model the run started with
-                    sampler, _ = curve_sampler(store, task.planner, info.parameters.get("model_id"))
-                    search = resume_search(store, resume_run_id, pool, sampler=sampler, stop=stop)
-            if search is None:
-                sampler, model_id = curve_sampler(store, task.planner, task.options.get("model_id"))
-                search = start_search(
-                    store,
-                    goal,
-                    options,
-                    pool,
-                    sampler=sampler,
-                    stop=stop,
-                    extra_parameters={"model_id": model_id, "eval_run_id": task.eval_run_id},
-                )
-            set_row(store, row_id, plan_run_id=search.run_id)
-            result = search.run(timeout_s=task.timeout_s)
+        with stop.installed():
+            result = run_search(store, request, stop, RowProgress())
         status = result.status if result.status in ("solved", "timeout", "interrupted") else "failed"
         time_to_solve = None
         if result.solved:
@@ -189,7 +167,7 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
             ended_at=utcnow(),
             message=None if status != "failed" else f"planner ended with status {result.status!r}",
         )
-        return TaskOutcome(task.goal_key, task.seed, status, time_to_solve, result.sim_calls, search.run_id)
+        return TaskOutcome(task.goal_key, task.seed, status, time_to_solve, result.sim_calls, result.run_id)
     except BaseException as exc:  # noqa: BLE001 - record why, whatever it was, then re-raise interrupts
         interrupted = isinstance(exc, KeyboardInterrupt)
         message = "interrupted" if interrupted else "".join(traceback.format_exception_only(exc)).strip()
@@ -210,6 +188,32 @@ def run_task(db_url: str, task: EvalTask) -> TaskOutcome:
         )
     finally:
         store.close()
+
+
+def _request(store: Any, task: EvalTask, resume_run_id: int | None) -> Any:
+    """The search of ``task``: its interrupted planner run continued (with the options and model it
+    started with) when it can be, else a new run with the task's options, seed and model. An evaluation
+    times the search alone (``timed_setup`` off)."""
+    import dataclasses
+
+    from twisted.planner import PlannerOptions, SearchRequest
+    from twisted.store.search import load_run
+
+    base = SearchRequest(
+        workers=task.workers, friction_scale=task.friction_scale, timeout_s=task.timeout_s, timed_setup=False
+    )
+    if resume_run_id is not None:
+        info = load_run(store, resume_run_id, with_nodes=False)
+        if info is not None and info.outcome != "solved" and info.checkpoint is not None:
+            return dataclasses.replace(base, resume=True, run_id=resume_run_id)
+    option_fields = {k: v for k, v in task.options.items() if k in PlannerOptions.__dataclass_fields__}
+    return dataclasses.replace(
+        base,
+        goal=task.goal_key,
+        options={**option_fields, "planner": task.planner, "seed": task.seed},
+        model_id=task.options.get("model_id"),
+        parameters={"eval_run_id": task.eval_run_id},
+    )
 
 
 def pending_tasks(session: Any, prepared: PreparedEval, eval_run_id: int) -> tuple[list[EvalTask], int]:

@@ -21,6 +21,7 @@ import numpy.typing as npt
 from sqlalchemy import select
 
 from twisted.experiments.discretise import discretisation_lines
+from twisted.experiments.robustness import plot_robustness, robustness_markdown, robustness_table
 from twisted.experiments.sensitivity import friction_label, friction_plots
 from twisted.store.experiments import FINISHED_STATUSES, EvalResult, Problem, ProblemSet
 
@@ -240,6 +241,10 @@ def write_report(store: Any, out_dir: str | Path, set_names: Sequence[str] | Non
             )
         lines.append("")
     lines += discretisation_lines(store)
+    robustness = robustness_table(store)
+    if robustness:  # episodes in worlds apart from the model (docs/DESIGN.md section 15.7)
+        lines += ["## Robustness: episodes in perturbed worlds", "", *robustness_markdown(robustness), ""]
+        sensitivity.append(plot_robustness(robustness, out / "robustness.png"))
     lines += ["## Plots", ""] + [f"![{p.stem}]({p.name})" for p in plots + sensitivity]
     md = out / "report.md"
     md.write_text("\n".join(lines) + "\n")

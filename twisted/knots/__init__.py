@@ -79,6 +79,7 @@ from twisted.knots.catalogue import (
     mirror_name,
     mirror_type,
     resolve_knot,
+    shown_name,
 )
 from twisted.knots.gauss import (
     GaussCode,
@@ -139,6 +140,7 @@ __all__ = [
     "primed_states",
     "resolve_knot",
     "rotations",
+    "shown_name",
     "simplify",
     "states_by_type",
     "states_tying",

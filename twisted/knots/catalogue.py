@@ -25,6 +25,7 @@ __all__ = [
     "COMPOSITE_NOTE",
     "KNOT_NAMES",
     "UNKNOWN",
+    "shown_name",
     "KnotNameError",
     "KnotType",
     "crossing_number",
@@ -324,3 +325,17 @@ def _beyond_table(key: str) -> bool:
     if not all(re.fullmatch(r"\d{1,3}_\d{1,4}[+-]?", p) for p in parts):
         return False
     return sum(int(p.split("_")[0]) for p in parts) > MAX_TABLE_CROSSINGS
+
+
+def shown_name(knot_type: str) -> str:
+    """The name a listing shows: the common name with its chirality where one stands for exactly this
+    type (``overhand+``, ``figure-eight``, ``square``), else the table type (``6_2+``)."""
+    for name in ("granny+", "granny-", "square"):
+        if KNOT_NAMES[name] == {knot_type}:
+            return name
+    bare = knotinfo_name(knot_type)
+    if knot_type == "0_1":
+        return "unknot"
+    if "#" in knot_type or bare not in COMMON_NAMES:
+        return knot_type
+    return COMMON_NAMES[bare][0] + knot_type[len(bare) :]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -62,18 +63,34 @@ class OptionSpec:
         return "--" + self.name.replace("_", "-")
 
     def check(self, value: Any) -> str | None:
-        """Why ``value`` is not allowed, in words; None when it is."""
+        """Why ``value`` is not allowed, in words; None when it is. The type is checked too: a value read
+        back from the store (a run's parameters) passes this same check as one from the command line.
+        None is allowed where it is the default."""
+        if value is None and self.default is None:
+            return None
         if self.choices:
             listed = ", ".join(self.choices)
-            return None if value in self.choices else f"must be one of {listed}, got {value!r}"
+            allowed = isinstance(value, str) and value in self.choices
+            return None if allowed else f"must be one of {listed}, got {_shown(value)}"
         if self.type is bool:
-            return None
-        number, (low, high) = float(value), self.bounds
-        if math.isnan(number) or not ((low < number if self.low_open else low <= number) and number <= high):
+            return None if isinstance(value, bool) else f"must be true or false, got {_shown(value)}"
+        wanted = numbers.Integral if self.type is int else numbers.Real
+        if isinstance(value, bool) or not isinstance(value, wanted):
+            return f"must be {'an integer' if self.type is int else 'a number'}, got {_shown(value)}"
+        low, high = self.bounds
+        number = int(value) if isinstance(value, numbers.Integral) else float(value)  # an int of any size
+        nan = isinstance(number, float) and math.isnan(number)
+        if nan or not ((low < number if self.low_open else low <= number) and number <= high):
             shown = "2**63-1" if high == MAX_SEED else f"{high:g}"
             must = self.must or f"lie in {'(' if self.low_open else '['}{low:g}, {shown}]"
-            return f"must {must}, got {value}"
+            return f"must {must}, got {_shown(value)}"
         return None
+
+
+def _shown(value: Any, limit: int = 60) -> str:
+    """A value quoted in a message, cut to about ``limit`` characters (a stored one can be huge)."""
+    text = repr(value[: 10 * limit] if isinstance(value, str | list) else value)
+    return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-2:]}"
 
 
 def option(default: Any, help: str, **spec: Any) -> Any:

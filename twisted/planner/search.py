@@ -12,15 +12,18 @@ and a set of high-level plans ``P`` from every reached state to the goal. Each i
 
 until a node passes the goal test (``parts.goal_test``: a goal state, or a goal state whose rope
 passes the pull test) or the time runs out. The answer is the path of curves from the root of ``T``
-to that node. Each decision is a part (:mod:`twisted.planner.strategies`); :class:`Twisted` keeps the
-tree, the plans, the statistics the parts read and the checkpoints. Where the parts differ from the
-paper: DESIGN 8.
+to that node. Each decision is a part (:mod:`twisted.planner.strategies`), the iteration itself
+(``parts.iteration``) and which results enter ``T`` (``parts.growth``) included; :class:`Twisted`
+keeps the tree, the plans, the statistics the parts read and the checkpoints. Where the parts differ
+from the paper: DESIGN 8.
 
-Baselines (``planner``): ``twisted`` samples curves from the inverse model; ``random-low`` follows
-the same high-level plans with uniformly random curves (the paper's "low+high level");
-``low-level-only`` applies random curves to random nodes of ``T`` with no topological guidance
-beyond the goal test; ``sac`` follows the high-level plans like ``twisted`` with a SAC+HER policy
-(``twisted rl train``) in place of the inverse model, as in the paper's comparison.
+Baselines (``planner``) are parts too: ``twisted`` samples curves from the inverse model;
+``random-low`` follows the same high-level plans with uniformly random curves (the paper's "low+high
+level"); ``low-level-only`` (:class:`~twisted.planner.strategies.LowLevelOnly`) applies random curves
+to random nodes of ``T`` with no topological guidance beyond the goal test; ``sac`` follows the
+high-level plans like ``twisted`` with a SAC+HER policy (``twisted rl train``) in place of the inverse
+model, as in the paper's comparison. A search both ways (``twisted untie``) is the growth
+:class:`~twisted.planner.strategies.BothWays` with a high level that plans removing moves too.
 
 The goal is a set of states (:class:`twisted.goals.Goal`): one P-data state, or every state that ties
 a named knot.
@@ -49,7 +52,7 @@ import numpy as np
 from twisted.goals import Goal, state_goal
 from twisted.planner.options import HEURISTICS, N_LINKS, OPTIONS_BEFORE, PLANNERS, PlannerOptions
 from twisted.planner.strategies import BlindCurves, CurveSampler, Parts, RandomCurves, default_parts
-from twisted.planner.tree import CINCH, Node, SearchTree, kind_key, pair_key
+from twisted.planner.tree import CINCH, Node, SearchTree, curve_row, pair_key
 from twisted.runtime import StopRequested, StopSignals
 from twisted.topology import PData
 
@@ -77,10 +80,8 @@ __all__ = [
 # [simulator calls, results kept in T] per source of curves (CALL_SOURCES); [tries, hits] per
 # (node index, requested next state) pair of follow_plan (read by the retry weight); [steps tried,
 # steps achieved] per state a follow_plan step started from (for analysis); [curves, curves
-# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler");
-# [steps tried, steps achieved] per move kind and crossings of the state it starts from ("R1@3", for
-# analysis)
-STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross", "kind")
+# that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
+STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
 CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only", "cinch")
 
 
@@ -127,10 +128,50 @@ class SearchResult:
     states: int
     path: list[Node] = field(default_factory=list)
     stats: dict[str, Any] = field(default_factory=dict)  # the checkpoint's tables (STATS_TABLES)
+    goal: Goal | None = None
+    tighten: bool = False  # the goal test was the pull test
+    pull_tests: int = 0
+    setup_s: float = 0.0  # set-up before the search (twisted.planner.session.run_search), in elapsed_s
+    model: dict[str, Any] = field(default_factory=dict)  # the inverse model sampled (model_id, model_samples)
 
     @property
     def solved(self) -> bool:
         return self.status == "solved"
+
+    def plan(self) -> list[dict[str, Any]]:
+        """The low-level plan as rows: step number, action and curve, crossings and state after it."""
+        return [
+            {"step": i, **curve_row(node.curve), "cross": node.p_data.cross, "state": node.p_data.to_list()}
+            for i, node in enumerate(self.path[1:], start=1)
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready data (what ``twisted plan --json`` prints)."""
+        goal = self.goal
+        return {
+            "run_id": self.run_id,
+            "goal": None if goal is None else goal.spec,
+            "knot": None if goal is None else goal.knot,
+            "goal_states": [] if goal is None else [p.to_list() for p in goal.states],
+            "reached_state": self.path[-1].p_data.to_list() if self.path else None,
+            "outcome": self.status,
+            "solved": self.solved,
+            "search_time_s": round(self.elapsed_s, 3),
+            "setup_s": round(self.setup_s, 3),
+            "sim_calls": self.sim_calls,
+            "sim_calls_by_source": self.calls_by_source(),
+            "plan_steps_by_move": {
+                kind: {"tried": tried, "reached": reached}
+                for kind, (tried, reached) in self.steps_by_move().items()
+            },
+            "iterations": self.iterations,
+            "nodes": self.nodes,
+            "states": self.states,
+            "plan": self.plan(),
+            "tighten": self.tighten,
+            "pull_tests": self.pull_tests,
+            **self.model,
+        }
 
     def calls_by_source(self) -> dict[str, int]:
         """Simulator calls per source of curves (CALL_SOURCES); they add up to ``sim_calls`` unless the
@@ -288,10 +329,7 @@ class Twisted:
             try:
                 self._check_stop(timeout_s)
                 self.iteration += 1
-                if self.options.planner == "low-level-only":
-                    self.low_level_only_step()
-                else:
-                    self.twisted_iteration()
+                self.parts.iteration.iterate(self)
             except _Stop as stop:
                 # discard the unfinished iteration: the store keeps the last boundary, so resuming
                 # replays it from the same RNG state and writes its nodes exactly once
@@ -322,6 +360,9 @@ class Twisted:
             states=len({self.tree.nodes[i].p_data.key for i in range(committed)}),
             path=self.tree.path(self.goal_node.index) if self.goal_node is not None else [],
             stats=self._boundary.stats,
+            goal=self.goal,
+            tighten=self.options.tighten,
+            pull_tests=self.pull_tests,
         )
 
     def _rollback(self, committed: int) -> None:
@@ -334,20 +375,6 @@ class Twisted:
         self.iteration = self._boundary.iteration
         self.sim_calls = self._boundary.sim_calls
         self.stats = {table: {k: list(v) for k, v in e.items()} for table, e in self._boundary.stats.items()}
-
-    def twisted_iteration(self) -> None:
-        """Lines 5-12 of Algorithm 1."""
-        s = self.select_topological_state()
-        if s is None:
-            # no reached state has a plan to the goal: only random curves can make progress
-            self.random_expand()
-            return
-        plan_index, plan = self.select_plan(s)
-        node = self.select_configuration(s, plan.states[1], plan.moves[0])
-        steps_done = self.follow_plan(node, plan)
-        self.learn(s, plan_index, steps_done / len(plan.moves))
-        if self.goal_node is None and self.rng.random() < self.options.p_expand:
-            self.random_expand()
 
     # -- SelectTopologicalState / SelectPlan / SelectConfiguration: the parts decide ---------------------
 
@@ -411,7 +438,6 @@ class Twisted:
                 self._count("cross", script.name, scripted, sum(reached[:scripted]))
                 self._count("cross", "sampler", len(curves) - scripted, sum(reached[scripted:]))
             self._count("move", f"{move.kind}^-1" if move.remove else str(move.kind), 1, hit is not None)
-            self._count("kind", kind_key(move, current.p_data.cross), 1, hit is not None)
             self._count("pair", pair_key(current.index, next_state.key), 1, hit is not None)
             self._count("step", current.p_data.key, 1, hit is not None)
             if self.goal_node is not None:
@@ -439,12 +465,6 @@ class Twisted:
             if self.goal_node is not None:
                 return
 
-    def low_level_only_step(self) -> None:
-        """Baseline: K random curves from a uniformly chosen node of ``T``; only the goal test guides it."""
-        node = self.tree.nodes[int(self.rng.integers(len(self.tree)))]
-        curves = self.random_curves.sample(node, None, None, self.options.k, self.rng)
-        self.simulate(node, curves, "low_level_only")
-
     # -- simulation and growing T -----------------------------------------------------------------------
 
     def simulate(self, parent: Node, curves: list[Any], source: str) -> list[Node | None]:
@@ -470,15 +490,12 @@ class Twisted:
         entry[1] += second
 
     def add_to_tree(self, parent: Node, curve: Any, result: Any, sim_call: int) -> Node | None:
-        """Keep ``result`` when Cross does not drop (the paper's rule) and can still lead to the goal.
-
-        A state with more crossings than the goal is dropped as well: every curve kept after it has
-        at least as many crossings, so nothing below it can be the goal.
-        """
+        """Keep ``result`` when the growth part takes it (``parts.growth``; Algorithm 1: Cross does not
+        drop and stays within the goal's)."""
         if not result.ok:
             return None
         p_data: PData = result.p_data
-        if not self.keeps(parent.p_data, p_data):
+        if not self.parts.growth.keeps(parent.p_data, p_data):
             return None
         node = self.tree.add(
             Node(
@@ -499,20 +516,10 @@ class Twisted:
             self.goal_node = node
         return node
 
-    def keeps(self, parent: PData, p_data: PData) -> bool:
-        """Whether a result in state ``p_data`` made from a node in ``parent`` enters ``T``: Cross does
-        not drop and stays within the goal's (a search that also removes crossings,
-        :class:`twisted.planner.untie.BothWays`, keeps more)."""
-        return parent.cross <= p_data.cross <= self.goal.cross
-
-    def wants_plans(self, p_data: PData) -> bool:
-        """Whether the high level is asked for plans from a newly reached state (adding moves only
-        lead to the goal from states with fewer crossings)."""
-        return p_data.cross < self.goal.cross
-
     def _reached(self, p_data: PData) -> None:
-        """A state reached for the first time: run the high level from it (through the plan cache)."""
-        if self.options.planner == "low-level-only" or not self.wants_plans(p_data):
+        """A state reached for the first time: run the high level from it (through the plan cache) when
+        the iteration follows plans and the growth wants them from there (``parts.growth``)."""
+        if not self.parts.iteration.plans or not self.parts.growth.wants_plans(p_data):
             self.plans[p_data.key] = []
             return
         self.plans[p_data.key] = list(self.high_level(p_data))[: self.options.plan_limit]

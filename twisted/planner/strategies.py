@@ -17,6 +17,11 @@ Monte Carlo tree search takes its evaluator and child-selection function):
   :class:`StepCurves` draws a plan step's K curves from them;
 - goal tests (``GoalTest``): :class:`StateMatch` (a goal state reached) and :class:`PullTest` (and the
   rope pulled tight ties the goal's knot, ``twisted.tighten``);
+- growth (``Growth``): which results enter ``T`` and which reached states get high-level plans:
+  :class:`AddingMoves` (Algorithm 1: Cross never drops), :class:`BothWays` (removing moves too, the
+  search of ``twisted untie``; :mod:`twisted.planner.untie`);
+- the iteration (``Iteration``): :class:`PlanGuided` (Algorithm 1's lines 5-12) or :class:`LowLevelOnly`
+  (the baseline: random curves from random nodes, no high level);
 - :class:`SummandCinch`: toward a composite knot (granny, square), a node whose rope ties one of the
   summands is pulled tight and let go once (``twisted.tighten.cinch``); steps start from the tight
   ropes (cinched, or made from a cinched one) where a state has any, and the crs choice weighs such a
@@ -45,12 +50,18 @@ from twisted.topology import PData
 
 __all__ = [
     "R1_ROOM_FLOOR",
+    "AddingMoves",
     "BlindCurves",
+    "BothWays",
     "CrossingStates",
     "CurveSampler",
     "GoalTest",
+    "Growth",
+    "Iteration",
+    "LowLevelOnly",
     "NodeSelection",
     "Parts",
+    "PlanGuided",
     "PlanSelection",
     "PullTest",
     "R1Room",
@@ -363,18 +374,27 @@ class StepCurves:
 
     :meth:`propose` returns the curves, scripted first, and how many are scripted; the search counts
     the curves and hits of each proposer of a step toward the script's move (the ``cross`` statistics).
-    A removing move (``move.remove``) is never scripted.
+    A removing move (``move.remove``) is never scripted; its K curves come from ``removal`` when given
+    (a both-ways search's ``--removal-curves random``), else from ``sampler``.
     """
 
-    def __init__(self, sampler: CurveSampler, script: ScriptedMove | None = None, share: float = 0.0) -> None:
+    def __init__(
+        self,
+        sampler: CurveSampler,
+        script: ScriptedMove | None = None,
+        share: float = 0.0,
+        removal: BlindCurves | None = None,
+    ) -> None:
         if not 0.0 <= share <= 1.0:
             raise ValueError(f"the scripted share must lie in [0, 1], got {share}")
-        self.sampler, self.share = sampler, share
+        self.sampler, self.share, self.removal = sampler, share, removal
         self.script: ScriptedMove = script if script is not None else ScriptedCross()
 
     def propose(
         self, node: Node, next_state: PData, move: Any, k: int, rng: np.random.Generator
     ) -> tuple[list[Any], int]:
+        if move is not None and move.remove and self.removal is not None:
+            return self.removal.sample(node, None, None, k, rng), 0
         scripted = 0
         if move is not None and move.kind == self.script.kind and not move.remove:
             scripted = min(k, int(round(self.share * k)))
@@ -560,6 +580,100 @@ class SummandCinch:
                 self._tight_in[key] -= 1
 
 
+# --- what enters T, and where the high level is asked ---------------------------------------------------
+
+
+class Growth(Protocol):
+    """Which simulated results enter ``T`` and from which reached states the high level is asked for plans."""
+
+    def keeps(self, parent: PData, p_data: PData) -> bool:
+        """Whether a result in ``p_data``, made from a node in ``parent``, enters ``T``."""
+        ...
+
+    def wants_plans(self, p_data: PData) -> bool:
+        """Whether plans to the goal are asked for from ``p_data`` (reached for the first time)."""
+        ...
+
+
+class AddingMoves:
+    """Algorithm 1: a result enters ``T`` when Cross does not drop and stays within the goal's (nothing
+    below a state with more crossings than the goal can be the goal); adding moves only lead to the goal
+    from states with fewer crossings, so only those get plans."""
+
+    def __init__(self, goal: Goal) -> None:
+        self.goal = goal
+
+    def keeps(self, parent: PData, p_data: PData) -> bool:
+        return parent.cross <= p_data.cross <= self.goal.cross
+
+    def wants_plans(self, p_data: PData) -> bool:
+        return p_data.cross < self.goal.cross
+
+
+class BothWays:
+    """A search with removing moves too (``twisted untie``, ``plan --from-run``;
+    :mod:`twisted.planner.untie`): a result enters ``T`` whenever it has no more crossings than the start
+    or the goal, whichever has more (every state on a both-ways plan does), and every state not in the
+    goal gets plans. The high level given must plan both ways
+    (:func:`twisted.planner.session.high_level` with ``both_ways=True``)."""
+
+    def __init__(self, goal: Goal, start: PData) -> None:
+        self.goal = goal
+        self.cross_cap = max(start.cross, goal.cross)
+
+    def keeps(self, parent: PData, p_data: PData) -> bool:
+        return p_data.cross <= self.cross_cap
+
+    def wants_plans(self, p_data: PData) -> bool:
+        return p_data not in self.goal
+
+
+# --- one iteration -----------------------------------------------------------------------------------------
+
+
+class Iteration(Protocol):
+    """What one iteration of the search does; ``plans``: whether it follows high-level plans (without, no
+    reached state is given any)."""
+
+    plans: bool
+
+    def iterate(self, search: Any) -> None:
+        """One iteration of ``search`` (a :class:`~twisted.planner.search.Twisted`)."""
+        ...
+
+
+class PlanGuided:
+    """Lines 5-12 of Algorithm 1: a state, a plan from it and a node in it (the selection parts), follow
+    the plan, and after a failed plan RandomExpand with probability ``p_expand``. While no reached state
+    has a plan, only RandomExpand."""
+
+    plans = True
+
+    def iterate(self, search: Any) -> None:
+        s = search.select_topological_state()
+        if s is None:  # no reached state has a plan to the goal: only random curves can make progress
+            search.random_expand()
+            return
+        plan_index, plan = search.select_plan(s)
+        node = search.select_configuration(s, plan.states[1], plan.moves[0])
+        steps_done = search.follow_plan(node, plan)
+        search.learn(s, plan_index, steps_done / len(plan.moves))
+        if search.goal_node is None and search.rng.random() < search.options.p_expand:
+            search.random_expand()
+
+
+class LowLevelOnly:
+    """The low-level-only baseline: K random curves (``parts.expand_curves``) from a uniformly chosen node
+    of ``T``; only the goal test guides it (no high level)."""
+
+    plans = False
+
+    def iterate(self, search: Any) -> None:
+        node = search.tree.nodes[int(search.rng.integers(len(search.tree)))]
+        curves = search.parts.expand_curves.sample(node, None, None, search.options.k, search.rng)
+        search.simulate(node, curves, "low_level_only")
+
+
 # --- the bundle -----------------------------------------------------------------------------------------
 
 
@@ -573,6 +687,8 @@ class Parts:
     step_curves: StepCurves
     expand_curves: BlindCurves  # RandomExpand's curves (and the low-level-only baseline's)
     goal_test: GoalTest
+    growth: Growth
+    iteration: Iteration
     room: R1Room | None = None  # the cache the selections share, forgotten on rollback
     cinch: SummandCinch | None = None  # toward a composite knot with options.cinch
 
@@ -589,12 +705,16 @@ def default_parts(
     goal: Goal,
     sampler: CurveSampler | None = None,
     goal_test: GoalTest | None = None,
+    growth: Growth | None = None,
+    removal: BlindCurves | None = None,
 ) -> Parts:
     """The parts ``options`` name: heuristic -> state and plan selection, ``retry_weight`` and ``r1_room``
     -> node selection (and the room the crs and plan choices weigh), ``cross_move`` -> the scripted share
-    of a Cross step (planner twisted); ``sampler`` (None: random curves) proposes the other curves.
+    of a Cross step (planner twisted), planner ``low-level-only`` -> :class:`LowLevelOnly` iterations
+    (else :class:`PlanGuided`); ``sampler`` (None: random curves) proposes the other curves.
     ``goal_test`` defaults to :class:`StateMatch`; with ``options.tighten`` it must be given (a
-    :class:`PullTest`, as :mod:`twisted.planner.session` makes it)."""
+    :class:`PullTest`, as :mod:`twisted.planner.session` makes it). ``growth`` defaults to
+    :class:`AddingMoves`; ``removal``: the proposer of a removing step's curves (None: ``sampler``)."""
     if goal_test is None:
         if options.tighten:
             raise ValueError("tighten: the search needs a PullTest goal test (see twisted.planner.session)")
@@ -617,9 +737,13 @@ def default_parts(
         states=states,
         plans=plans,
         nodes=RetryWeightedNodes(options.retry_weight, room, cinch),
-        step_curves=StepCurves(sampler if sampler is not None else random_curves, ScriptedCross(), share),
+        step_curves=StepCurves(
+            sampler if sampler is not None else random_curves, ScriptedCross(), share, removal
+        ),
         expand_curves=random_curves,
         goal_test=goal_test,
+        growth=growth if growth is not None else AddingMoves(goal),
+        iteration=LowLevelOnly() if options.planner == "low-level-only" else PlanGuided(),
         room=room,
         cinch=cinch,
     )

@@ -1,6 +1,5 @@
 """The search tree ``T`` of Algorithm 1: reached configurations (``Node``) in creation order, indexed by
-topological state (``SearchTree``); and the statistics keys of a (node, requested next state) pair and
-of a plan step's move kind."""
+topological state (``SearchTree``); and the statistics key of a (node, requested next state) pair."""
 
 from __future__ import annotations
 
@@ -11,7 +10,7 @@ import numpy as np
 
 from twisted.topology import PData
 
-__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "is_cinched", "kind_key", "pair_key"]
+__all__ = ["CINCH", "CinchAction", "Node", "SearchTree", "curve_row", "is_cinched", "pair_key"]
 
 
 @dataclass(frozen=True)
@@ -30,11 +29,13 @@ def is_cinched(node: Node) -> bool:
     return getattr(node.curve, "action", "curve") == "cinch"
 
 
-def kind_key(move: Any, cross: int) -> str:
-    """The key of a plan step in the ``kind`` statistics table: its move kind (``R1``, ``R2``,
-    ``Cross``, a removing move with ``^-1``) and the crossings of the state it starts from, e.g.
-    ``"R1@3"``."""
-    return f"{move.kind}^-1@{cross}" if move.remove else f"{move.kind}@{cross}"
+def curve_row(curve: Any) -> dict[str, Any]:
+    """A step of a low-level plan as a row: its action, and the curve's parameters (None for a cinch)."""
+    action = getattr(curve, "action", "curve")
+    if action != "curve":
+        return {"action": action, "link": None, "z_max_m": None, "x_m": None, "y_m": None}
+    parameters = {"link": curve.link, "z_max_m": curve.z_max_m, "x_m": curve.x_m, "y_m": curve.y_m}
+    return {"action": action, **parameters}
 
 
 def pair_key(node_index: int, next_state_key: str) -> str:

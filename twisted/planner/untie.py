@@ -1,12 +1,13 @@
 """Untie and retie: searches from any stored rope to any goal, the straight rope ``[]`` included.
 
-A search *both ways* (:class:`BothWays`) differs from Algorithm 1 in three places, all small:
+A search *both ways* is Algorithm 1 with three parts swapped (:func:`both_ways_parts`), all small:
 
 - its high level plans with adding and removing moves (:func:`twisted.moves.plans_both_ways`, through
   the plan cache under a key of its own), so a state with more crossings than the goal, or with a
   crossing the goal lacks, has plans too;
-- a result enters ``T`` whenever it has no more crossings than the start or the goal, whichever has
-  more (the paper's rule "Cross does not drop" would forbid every untying step);
+- its growth is :class:`twisted.planner.strategies.BothWays`: a result enters ``T`` whenever it has no
+  more crossings than the start or the goal, whichever has more (the paper's rule "Cross does not
+  drop" would forbid every untying step);
 - the curves of a removing step come from the proposer ``removal_curves`` names: ``model`` (the
   inverse model, conditioned on the removing move, which it encodes apart from the adding one; the
   shipped model has never seen one) or ``random`` (uniform random curves, the ``random-low``
@@ -27,19 +28,21 @@ import numpy as np
 
 from twisted.goals import Goal, PlanInputError, make_goal, state_goal
 from twisted.moves import sub_states
-from twisted.planner.search import Twisted
+from twisted.planner.options import MAX_SEED, OptionSpec
+from twisted.planner.strategies import BothWays, RandomCurves
 from twisted.topology import EMPTY, PData, parse_p_data
 
 __all__ = [
     "PARAMETERS",
     "REMOVAL_CURVES",
-    "BothWays",
     "RunEnd",
+    "accepted_configuration",
     "both_ways_needed",
+    "both_ways_parts",
     "check_start",
+    "check_untie_run",
     "make_any_goal",
     "run_end",
-    "search_class",
 ]
 
 # proposers of a removing step's curves (see the module docstring)
@@ -47,54 +50,34 @@ REMOVAL_CURVES = ("model", "random")
 DEFAULT_REMOVAL_CURVES = "random"
 # runs.parameters keys of a both-ways search (beside the planner options and the model id)
 PARAMETERS = ("both_ways", "removal_curves", "from_run")
+_ID = (0, MAX_SEED)
+# what a run stores beside its planner options, declared as they are: --removal-curves is checked by
+# this declaration on the command line (check_start) and in a stored run (stored_options)
+REMOVAL_SPEC = OptionSpec(
+    "removal_curves", str, DEFAULT_REMOVAL_CURVES, "Curves of a removing step.", choices=REMOVAL_CURVES
+)
+STORED = (
+    REMOVAL_SPEC,
+    OptionSpec("both_ways", bool, False, "The search also removes crossings."),
+    OptionSpec("from_run", int, None, "The run whose end the search started from.", bounds=_ID),
+    OptionSpec("model_id", int, None, "The inverse model or SAC policy sampled.", bounds=_ID),
+    OptionSpec("start_configuration_id", int, None, "The stored start configuration.", bounds=_ID),
+)
 
 
-class BothWays(Twisted):
-    """Algorithm 1 with adding and removing moves (see the module docstring).
-
-    ``removal_curves``: ``model`` or ``random``, the proposer of a removing step's K curves.
-    The high level given must plan both ways (:func:`twisted.planner.session.high_level` with
-    ``both_ways=True``).
-    """
-
-    def __init__(
-        self,
-        goal: Goal | PData,
-        tree: Any,
-        *args: Any,
-        removal_curves: str = DEFAULT_REMOVAL_CURVES,
-        **kwargs: Any,
-    ) -> None:
-        if removal_curves not in REMOVAL_CURVES:
-            raise ValueError(
-                f"removal_curves must be one of {', '.join(REMOVAL_CURVES)}, got {removal_curves!r}"
-            )
-        self.removal_curves = removal_curves
-        goal = goal if isinstance(goal, Goal) else state_goal(goal)
-        if len(tree) == 0:
-            raise ValueError("the tree needs its root (the initial configuration)")
-        # every state on a plan has at most this many crossings (twisted.moves.plans_both_ways)
-        self.cross_cap = max(tree.nodes[0].p_data.cross, goal.cross)
-        super().__init__(goal, tree, *args, **kwargs)
-
-    def keeps(self, parent: PData, p_data: PData) -> bool:
-        return p_data.cross <= self.cross_cap
-
-    def wants_plans(self, p_data: PData) -> bool:
-        return p_data not in self.goal
-
-    def step_curves(self, node: Any, next_state: PData, move: Any) -> tuple[list[Any], int]:
-        if move is not None and move.remove and self.removal_curves == "random":
-            return self.random_curves.sample(node, None, None, self.options.k, self.rng), 0
-        return super().step_curves(node, next_state, move)
-
-
-def search_class(parameters: Mapping[str, Any]) -> tuple[type[Twisted], dict[str, Any]]:
-    """The search class of a run's stored parameters and the keyword arguments it takes beyond
-    :class:`Twisted`'s (a run stored before removing moves existed searches adding only)."""
-    if parameters.get("both_ways"):
-        return BothWays, {"removal_curves": parameters.get("removal_curves", DEFAULT_REMOVAL_CURVES)}
-    return Twisted, {}
+def both_ways_parts(parameters: Mapping[str, Any], goal: Goal, start: PData) -> dict[str, Any]:
+    """The parts a run's parameters (``runs.parameters``) make a search both ways with, as keyword
+    arguments of :func:`twisted.planner.strategies.default_parts` (``growth``, ``removal``): none for a
+    search that adds crossings only (a run stored before removing moves existed is one). ``start``: the
+    state of the tree's root. Raises :class:`PlanInputError` on a proposer that does not exist."""
+    if not parameters.get("both_ways"):
+        return {}
+    removal_curves = parameters.get("removal_curves", DEFAULT_REMOVAL_CURVES)
+    problem = REMOVAL_SPEC.check(removal_curves)
+    if problem is not None:
+        raise PlanInputError(f"removal_curves {problem}")
+    removal = RandomCurves() if removal_curves == "random" else None
+    return {"growth": BothWays(goal, start), "removal": removal}
 
 
 def both_ways_needed(start: PData, goal: Goal) -> bool:
@@ -155,7 +138,50 @@ def run_end(store: Any, run_id: int) -> RunEnd:
             "to start from; give a solved run"
         )
     end = path[-1]
-    return RunEnd(run_id, end.seq, np.asarray(end.q), np.asarray(end.points), end.p_data)
+    q, points = np.asarray(end.q), np.asarray(end.points)
+    accepted_configuration(q, points, "search_nodes", end.id)
+    return RunEnd(run_id, end.seq, q, points, end.p_data)
+
+
+def accepted_configuration(q: np.ndarray, points: np.ndarray, table: str, row: int) -> None:
+    """A stored configuration a search may start from: finite arrays of the rope profile's sizes
+    (:func:`twisted.store.boundary.check_configuration`), a state the simulator takes (its length, and
+    in the workspace, on the table, without deep penetration: ``RopeSim.invalid_reason``) and whose
+    link points are the stored ones. StoredValueError naming the field otherwise, before any run exists."""
+    from twisted.rope import N_POINTS, ROPE
+    from twisted.sim import RopeSim
+    from twisted.store.boundary import StoredValueError, check_configuration
+
+    check_configuration(q, points, N_POINTS, table, row)
+    sim = RopeSim()
+    if q.shape != (sim.state_size,):
+        problem = f"holds {q.size} floats; a state of the rope in use ({ROPE.name}) has {sim.state_size}"
+        raise StoredValueError(table, row, "q", problem)
+    with np.errstate(all="ignore"):  # a stored 1e300 overflows: the reason says so, not a warning
+        sim.set_state(q)
+        reason = sim.invalid_reason()
+    if reason is not None:
+        raise StoredValueError(table, row, "q", f"the simulator refuses it: {reason}")
+    off = float(np.max(np.abs(sim.link_points() - points)))
+    if off > 1e-6:
+        raise StoredValueError(table, row, "points", f"are not the link points of its q ({off:.3g} m off)")
+
+
+def check_untie_run(store: Any, run_id: int) -> None:
+    """``twisted untie --resume RUN_ID``: PlanInputError unless ``run_id`` is an untie run (a search from a
+    run's end to the straight rope), so that a tying search is not continued under the untie command."""
+    from twisted.store.search import load_run
+
+    info = load_run(store, run_id, with_nodes=False)
+    if info is None:
+        raise PlanInputError(f"--resume {run_id}: there is no planner run {run_id} in this database")
+    if info.parameters.get("from_run") is None or info.goal.states != (EMPTY,):
+        start = info.parameters.get("from_run")
+        started = "the straight rope or a configuration" if start is None else f"the end of run {start}"
+        raise PlanInputError(
+            f"--resume {run_id}: run {run_id} is not an untie run (it searches from {started} to "
+            f"{info.goal.label}); continue it with `twisted plan --resume {run_id}`"
+        )
 
 
 def check_start(
@@ -167,9 +193,8 @@ def check_start(
     if from_run is not None and resume:
         raise PlanInputError("--from-run cannot change the start of a resumed run")
     if removal_curves is not None:
-        if removal_curves not in REMOVAL_CURVES:
-            raise PlanInputError(
-                f"--removal-curves must be one of {', '.join(REMOVAL_CURVES)}, got {removal_curves!r}"
-            )
+        problem = REMOVAL_SPEC.check(removal_curves)
+        if problem is not None:
+            raise PlanInputError(f"--removal-curves {problem}")
         if resume:
             raise PlanInputError("--removal-curves cannot change a resumed run (it keeps its own)")

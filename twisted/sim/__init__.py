@@ -16,7 +16,7 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 
 from twisted.rope import N_LINKS, N_POINTS  # noqa: E402
 from twisted.sim.pool import SimPool, SimResult, simulate  # noqa: E402
-from twisted.sim.rope import CURVE_HIGH, CURVE_LOW, Curve, CurveOutcome, RopeSim, sample_curve  # noqa: E402
+from twisted.sim.rope import CURVE_HIGH, CURVE_LOW, Curve, CurveOutcome, Pin, RopeSim, sample_curve  # noqa: E402
 
 __all__ = [
     "CURVE_HIGH",
@@ -25,6 +25,7 @@ __all__ = [
     "CurveOutcome",
     "N_LINKS",
     "N_POINTS",
+    "Pin",
     "RopeSim",
     "SimPool",
     "SimResult",

@@ -39,11 +39,19 @@ class RopeParams:
     joint_armature: float = 1e-5
     joint_limit_deg: float = 110.0  # without limits an end link folds onto its neighbour
     weld_solref: tuple[float, float] = (0.02, 1.0)
+    # the second hand's welds (two-hand curves, docs/DESIGN.md section 3.6)
+    pin_weld_solref: tuple[float, float] = (0.01, 1.0)
+    pin_weld_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
+    pin_weld_torquescale: float = 10.0
     # Twice as stiff as MuJoCo's default (0.02 s) and still 2 x timestep: with the default a strand
     # dragged at low height sank over a radius deep into another one or into the table in ~1 % of
     # random curves; with 0.01 s none in 400, at the same cost.
     contact_solref: tuple[float, float] = (0.01, 1.0)
     contact_solimp: tuple[float, float, float] = (0.9, 0.95, 0.001)  # MuJoCo's default
+    # The capsules' radius and density (MuJoCo's default, 1000 kg/m^3: a link of about 0.0136 kg). The
+    # planner's rope keeps these; a world apart from it (twisted.world) draws others per episode.
+    link_radius_m: float = LINK_RADIUS_M
+    link_density_kg_m3: float = 1000.0
 
 
 def link_name(i: int) -> str:
@@ -97,6 +105,12 @@ def _chain(i: int, step: int) -> str:
 
 TAIL_GRIPPER = "tail_gripper"
 TAIL_WELD = "hold_tail"
+# the second hand of a two-hand curve (docs/DESIGN.md section 3.6): a mocap body and one weld per link
+PIN_GRIPPER = "pin_gripper"
+
+
+def pin_weld_name(i: int) -> str:
+    return f"pin_{i}"
 
 
 def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> str:
@@ -104,7 +118,10 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
 
     ``tail_gripper`` adds a second mocap body and one inactive weld of it to the tail link (the pull
     test of :mod:`twisted.tighten` holds the head with the first gripper, the tail with this one).
-    Neither adds a degree of freedom: states are the same vectors as without it.
+    Every model has a third mocap body, the second hand of a two-hand curve (:data:`PIN_GRIPPER`), with
+    one inactive weld to each link (:func:`pin_weld_name`); it comes after the rope and its welds after
+    the others, so every other id is what it was without it. No mocap body adds a degree of freedom:
+    states are the same vectors in every model.
     """
     mu = _fmt(*(f * params.friction_scale for f in FRICTION))
     lim = params.joint_limit_deg
@@ -121,8 +138,14 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
             f'active="false" '
             f'relpose="0 0 0 1 0 0 0" solref="{_fmt(*params.weld_solref)}"/>'
         )
+    welds += "".join(
+        f'<weld name="{pin_weld_name(i)}" body1="{PIN_GRIPPER}" body2="{link_name(i)}" active="false" '
+        f'relpose="0 0 0 1 0 0 0" solref="{_fmt(*params.pin_weld_solref)}" '
+        f'solimp="{_fmt(*params.pin_weld_solimp)}" torquescale="{params.pin_weld_torquescale:g}"/>'
+        for i in range(N_LINKS)
+    )
     middle = (
-        f'<body name="{link_name(MIDDLE_LINK)}" pos="{_fmt(0, 0, LINK_RADIUS_M)}">'
+        f'<body name="{link_name(MIDDLE_LINK)}" pos="{_fmt(0, 0, params.link_radius_m)}">'
         f'<freejoint name="root"/>{_link_geom(MIDDLE_LINK)}'
         f"{_chain(MIDDLE_LINK - 1, -1)}{_chain(MIDDLE_LINK + 1, +1)}</body>"
     )
@@ -136,7 +159,8 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
     <default class="rope">
       <joint type="hinge" stiffness="{params.joint_stiffness:.10g}" damping="{params.joint_damping:.10g}"
              armature="{params.joint_armature:.10g}" limited="true" range="{_fmt(-lim, lim)}"/>
-      <geom type="capsule" size="{_fmt(LINK_RADIUS_M)}" rgba="0.8 0.3 0.2 1"/>
+      <geom type="capsule" size="{_fmt(params.link_radius_m)}" density="{params.link_density_kg_m3:.10g}"
+            rgba="0.8 0.3 0.2 1"/>
     </default>
   </default>
   <worldbody>
@@ -147,6 +171,7 @@ def rope_xml(params: RopeParams = RopeParams(), tail_gripper: bool = False) -> s
     </body>
     {second}
     {middle}
+    <body name="{PIN_GRIPPER}" mocap="true" pos="0 0 0.6"/>
   </worldbody>
   <equality>{welds}</equality>
 </mujoco>

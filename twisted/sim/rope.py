@@ -6,6 +6,9 @@ arc on top, release it a little above the table (or as soon as it lands on anoth
 step until the rope has settled. The result depends only on ``state()`` and the curve: every
 action starts from ``mj_resetData`` and the restored state, so solver warm starts or a previous
 grasp never leak into the next action, in this process or another.
+
+A curve may name a second hand (:class:`Pin`, docs/DESIGN.md section 3.6): a second gripper holds one
+link where it lies (or after placing it, or while carrying it) until the active link is let go.
 """
 
 from __future__ import annotations
@@ -21,11 +24,13 @@ import numpy.typing as npt
 from twisted.rope import N_LINKS, N_POINTS
 from twisted.sim.mjcf import (
     LINK_RADIUS_M,
+    PIN_GRIPPER,
     TAIL_GRIPPER,
     TAIL_WELD,
     RopeParams,
     joint_names,
     link_name,
+    pin_weld_name,
     rope_xml,
     weld_name,
 )
@@ -46,6 +51,12 @@ MIN_LIFT_M = 0.005
 GRIPPER_SPEED_M_S = 0.3  # mean speed along the path; the minimum-jerk peak is 1.875x this
 MIN_MOVE_S = 0.2
 RELEASE_HEIGHT_M = LINK_RADIUS_M + 0.003  # centre height at the end of the path, just above the table
+
+# A pinned link (two-hand curve) dragged farther than this from the second hand is a rejection: the carry
+# pulled the rope between the two hands taut, which a gripper would not hold.
+PIN_SLIP_M = LINK_RADIUS_M / 2
+# a hand that carries its link leads it by a few mm at speed anyway (the weld is a stiff spring)
+MOVING_PIN_SLIP_M = 2 * LINK_RADIUS_M
 
 # Settling: every link slower than SETTLE_SPEED_M_S over two consecutive windows, with a cap.
 SETTLE_WINDOW_S = 0.05
@@ -73,6 +84,62 @@ _INSTABILITY_WARNINGS = [
 ]
 
 
+def _check_link(what: str, link: object) -> int:
+    """``link`` as an int in 0..N_LINKS-1, else a ValueError that names ``what``."""
+    if isinstance(link, bool) or not isinstance(link, (int, np.integer)):
+        raise ValueError(f"{what} must be an integer 0..{N_LINKS - 1}, got {link!r}")
+    if not 0 <= link < N_LINKS:
+        raise ValueError(f"{what} must be in 0..{N_LINKS - 1}, got {link}")
+    return int(link)
+
+
+PIN_MODES = ("hold", "place", "carry")
+
+
+@dataclass(frozen=True, slots=True)
+class Pin:
+    """The second hand of a two-hand curve (docs/DESIGN.md section 3.6): it grasps ``link`` and
+
+    - ``"hold"``: holds it where it lies (position and orientation, not lifted) from before the active
+      carry until the active link is let go;
+    - ``"place"``: first carries it by ``(x_m, y_m)`` with a lift of ``z_max_m + MIN_LIFT_M``, turning it by
+      ``turn_rad`` about the vertical (the active gripper waits), lets the rope come to rest with it held,
+      then holds it there through the active carry (pick, place, hold);
+    - ``"carry"``: carries it so, at the same time as the active link (both paths last as long as the
+      longer would alone), and lets go with it.
+
+    ``around`` (-1, 0, +1) bends the active link's path: 0 is the straight carry of section 3.2; +1 (-1)
+    carries it counter-clockwise (clockwise) about where the pinned link is when the active carry starts,
+    to the same target, the link turned with the angle it sweeps. Then both hands let go and the rope
+    settles as after a one-hand curve.
+    """
+
+    link: int
+    mode: str = "hold"
+    z_max_m: float = 0.0
+    x_m: float = 0.0
+    y_m: float = 0.0
+    turn_rad: float = 0.0
+    around: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "link", _check_link("the pinned link", self.link))
+        if self.mode not in PIN_MODES:
+            raise ValueError(f"pin mode must be one of {', '.join(PIN_MODES)}, got {self.mode!r}")
+        values = (self.z_max_m, self.x_m, self.y_m, self.turn_rad)
+        if not all(math.isfinite(float(v)) for v in values):
+            raise ValueError(f"pin (z_max_m, x_m, y_m, turn_rad) must be finite, got {values}")
+        for name, v in zip(("z_max_m", "x_m", "y_m", "turn_rad"), values, strict=True):
+            object.__setattr__(self, name, float(v))
+        if self.mode == "hold" and any(values):
+            raise ValueError(
+                f"a held pin does not move: z_max_m, x_m, y_m and turn_rad are for modes place and carry, "
+                f"got {values}"
+            )
+        if self.around not in (-1, 0, 1) or isinstance(self.around, bool):
+            raise ValueError(f"pin around must be -1, 0 or +1, got {self.around!r}")
+
+
 @dataclass(frozen=True, slots=True)
 class Curve:
     """One curve action: grasp ``link``, lift by ``z_max_m``, move it by ``(x_m, y_m)``, release.
@@ -80,28 +147,36 @@ class Curve:
     ``x_m``/``y_m`` are a displacement relative to the grasped link's current position; the
     link's peak lift is ``z_max_m + MIN_LIFT_M`` (so z_max = 0 still clears the table). Values
     outside ``CURVE_LOW..CURVE_HIGH`` are allowed (a sampled curve may stray); the simulator rejects
-    a result that leaves the workspace. A negative ``z_max_m`` counts as 0.
+    a result that leaves the workspace. A negative ``z_max_m`` counts as 0. ``pin``, when given, is the
+    second hand (:class:`Pin`); it must hold another link than ``link``.
     """
 
     link: int
     z_max_m: float
     x_m: float
     y_m: float
+    pin: Pin | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.link, bool) or not isinstance(self.link, (int, np.integer)):
-            raise ValueError(f"curve link must be an integer 0..{N_LINKS - 1}, got {self.link!r}")
-        if not 0 <= self.link < N_LINKS:
-            raise ValueError(f"curve link must be in 0..{N_LINKS - 1}, got {self.link}")
+        object.__setattr__(self, "link", _check_link("curve link", self.link))
         values = (self.z_max_m, self.x_m, self.y_m)
         if not all(math.isfinite(float(v)) for v in values):
             raise ValueError(f"curve (z_max_m, x_m, y_m) must be finite, got {values}")
-        object.__setattr__(self, "link", int(self.link))
         for name, v in zip(("z_max_m", "x_m", "y_m"), values, strict=True):
             object.__setattr__(self, name, float(v))
+        if self.pin is not None:
+            if not isinstance(self.pin, Pin):
+                raise ValueError(f"a curve's pin must be a Pin, got {self.pin!r}")
+            if self.pin.link == self.link:
+                raise ValueError(
+                    f"the pinned link {self.pin.link} is the curve's active link: the second hand must "
+                    f"hold another link"
+                )
 
     def to_array(self) -> FloatArray:
-        """``[link, z_max_m, x_m, y_m]`` as float64."""
+        """``[link, z_max_m, x_m, y_m]`` as float64 (a one-hand curve: a two-hand one has no such array)."""
+        if self.pin is not None:
+            raise ValueError("a two-hand curve (with a pin) has no 4-number array")
         return np.array([self.link, self.z_max_m, self.x_m, self.y_m], dtype=np.float64)
 
     @classmethod
@@ -113,13 +188,14 @@ class Curve:
         return cls(int(round(v[0])), float(v[1]), float(v[2]), float(v[3]))
 
     def clipped(self) -> Curve:
-        """The curve with z_max, x and y clipped to ``CURVE_LOW..CURVE_HIGH``."""
+        """The curve with z_max, x and y clipped to ``CURVE_LOW..CURVE_HIGH`` (the pin kept as it is)."""
         lo, hi = CURVE_LOW, CURVE_HIGH
         return Curve(
             self.link,
             float(np.clip(self.z_max_m, lo[1], hi[1])),
             float(np.clip(self.x_m, lo[2], hi[2])),
             float(np.clip(self.y_m, lo[3], hi[3])),
+            self.pin,
         )
 
 
@@ -141,6 +217,18 @@ class CurveOutcome:
     settle_steps: int = 0
 
 
+def _turned(quat: npt.ArrayLike, yaw: FloatArray) -> FloatArray:
+    """The orientation ``quat`` (w, x, y, z) turned about the world's vertical by each angle of ``yaw``."""
+    w0, x0, y0, z0 = np.asarray(quat, dtype=np.float64)
+    c, s = np.cos(0.5 * yaw), np.sin(0.5 * yaw)
+    return np.stack([c * w0 - s * z0, c * x0 - s * y0, c * y0 + s * x0, c * z0 + s * w0], axis=1)
+
+
+def _pad(a: FloatArray, n: int) -> FloatArray:
+    """``a`` (one row per step) held at its last row up to ``n`` rows."""
+    return a if len(a) >= n else np.concatenate([a, np.repeat(a[-1:], n - len(a), axis=0)])
+
+
 def minimum_jerk(tau: FloatArray) -> FloatArray:
     """Minimum-jerk progress 0 -> 1 at normalised time ``tau`` in [0, 1]; at rest at both ends."""
     return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
@@ -150,11 +238,17 @@ class RopeSim:
     """The rope on the table with a mocap gripper; one MuJoCo model built once per instance."""
 
     def __init__(
-        self, friction_scale: float = 1.0, timestep_s: float = DEFAULT_TIMESTEP_S, tail_gripper: bool = False
+        self,
+        friction_scale: float = 1.0,
+        timestep_s: float = DEFAULT_TIMESTEP_S,
+        tail_gripper: bool = False,
+        params: RopeParams | None = None,
     ) -> None:
+        """``params``, when given, is the whole physics (a world apart from the planner's model,
+        :mod:`twisted.world`) and ``friction_scale`` / ``timestep_s`` are then not taken."""
         if not (math.isfinite(friction_scale) and friction_scale > 0):
             raise ValueError(f"friction_scale must be a positive number, got {friction_scale!r}")
-        self.params = RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
+        self.params = params or RopeParams(timestep_s=timestep_s, friction_scale=friction_scale)
         self.tail_gripper = tail_gripper  # the second gripper of the pull test (docs/DESIGN.md section 2.2)
         self.model = mujoco.MjModel.from_xml_string(rope_xml(self.params, tail_gripper=tail_gripper))
         self.data = mujoco.MjData(self.model)
@@ -167,6 +261,8 @@ class RopeSim:
         self._gripper = m.body("gripper").mocapid[0]
         self._tail_gripper = int(m.body(TAIL_GRIPPER).mocapid[0]) if tail_gripper else -1
         self._tail_weld = int(m.equality(TAIL_WELD).id) if tail_gripper else -1
+        self._pin_gripper = int(m.body(PIN_GRIPPER).mocapid[0])
+        self._pin_weld = np.array([m.equality(pin_weld_name(i)).id for i in range(N_LINKS)])
         # the rope tips lie opposite the first/last joint anchor in the end links' frames
         self._head_offset = -m.jnt_pos[self._pitch[0]].copy()
         self._tail_offset = -m.jnt_pos[self._pitch[-1]].copy()
@@ -273,24 +369,67 @@ class RopeSim:
         ``lift * sin(pi s)`` over the line from the link's height down to the release height. The
         carry lasts at least ``min_duration_s`` (a bench that also turns the gripper slows it down).
         """
-        start = self.data.xpos[self._link_body[curve.link]].copy()
-        dxy = np.array([curve.x_m, curve.y_m])
-        lift = max(curve.z_max_m, 0.0) + MIN_LIFT_M
+        return self._line_path(curve.link, curve.z_max_m, curve.x_m, curve.y_m, min_duration_s)[0]
+
+    def _line_path(
+        self, link: int, z_max_m: float, x_m: float, y_m: float, min_duration_s: float = 0.0
+    ) -> tuple[FloatArray, FloatArray]:
+        """The straight carry of :meth:`gripper_path` for ``link`` and its progress ``s`` per step."""
+        start = self.data.xpos[self._link_body[link]].copy()
+        dxy = np.array([x_m, y_m])
+        lift = max(z_max_m, 0.0) + MIN_LIFT_M
         duration = max(MIN_MOVE_S, min_duration_s, (float(np.hypot(*dxy)) + 2.0 * lift) / GRIPPER_SPEED_M_S)
-        n = max(1, math.ceil(duration / self.model.opt.timestep))
-        s = minimum_jerk(np.arange(1, n + 1) / n)
-        path = np.empty((n, 3))
+        s = self._progress(duration)
+        path = np.empty((len(s), 3))
         path[:, :2] = start[:2] + s[:, None] * dxy
         path[:, 2] = start[2] + (RELEASE_HEIGHT_M - start[2]) * s + lift * np.sin(np.pi * s)
-        return path
+        return path, s
+
+    def _progress(self, duration_s: float) -> FloatArray:
+        """Minimum-jerk progress, one value per time step of a carry lasting ``duration_s``."""
+        n = max(1, math.ceil(duration_s / self.model.opt.timestep))
+        return minimum_jerk(np.arange(1, n + 1) / n)
+
+    @staticmethod
+    def _line_duration(z_max_m: float, x_m: float, y_m: float) -> float:
+        return (float(np.hypot(x_m, y_m)) + 2.0 * (max(z_max_m, 0.0) + MIN_LIFT_M)) / GRIPPER_SPEED_M_S
+
+    def _around_path(
+        self, curve: Curve, pivot: FloatArray, around: int, min_duration_s: float = 0.0
+    ) -> tuple[FloatArray, FloatArray]:
+        """The active carry of a pin with ``around`` = +1 / -1: from the link's centre to the same target as
+        :meth:`gripper_path`, counter-clockwise / clockwise about ``pivot`` (x, y), the radius changing
+        evenly with the angle, the same height arc; positions and the angle swept so far, per step."""
+        start = self.data.xpos[self._link_body[curve.link]].copy()
+        v0 = start[:2] - pivot
+        v1 = v0 + np.array([curve.x_m, curve.y_m])
+        r0, r1 = float(np.hypot(*v0)), float(np.hypot(*v1))
+        a0 = math.atan2(v0[1], v0[0])
+        sweep = (math.atan2(v1[1], v1[0]) - a0) % (2.0 * math.pi)  # counter-clockwise, in [0, 2 pi)
+        if around < 0 and sweep > 0.0:
+            sweep -= 2.0 * math.pi
+        lift = max(curve.z_max_m, 0.0) + MIN_LIFT_M
+        length = abs(sweep) * 0.5 * (r0 + r1) + abs(r1 - r0)
+        duration = max(MIN_MOVE_S, min_duration_s, (length + 2.0 * lift) / GRIPPER_SPEED_M_S)
+        s = self._progress(duration)
+        angle, radius = a0 + s * sweep, r0 + s * (r1 - r0)
+        path = np.empty((len(s), 3))
+        path[:, 0] = pivot[0] + radius * np.cos(angle)
+        path[:, 1] = pivot[1] + radius * np.sin(angle)
+        path[:, 2] = start[2] + (RELEASE_HEIGHT_M - start[2]) * s + lift * np.sin(np.pi * s)
+        return path, s * sweep
 
     def grasp(self, link: int) -> None:
         """Put the gripper exactly on ``link`` and weld it there (its weld relpose is the identity)."""
+        self._weld_to(self._gripper, self._weld, link)
+
+    def _weld_to(self, mocap: int, welds: npt.NDArray[np.int64], link: int) -> None:
+        """Put mocap body ``mocap`` on ``link`` and switch on its weld there (of its ``welds``), only that."""
         d, body = self.data, self._link_body[link]
-        d.mocap_pos[self._gripper] = d.xpos[body]
-        d.mocap_quat[self._gripper] = d.xquat[body]
-        d.eq_active[self._weld] = 0
-        d.eq_active[self._weld[link]] = 1
+        d.mocap_pos[mocap] = d.xpos[body]
+        d.mocap_quat[mocap] = d.xquat[body]
+        d.eq_active[welds] = 0
+        d.eq_active[welds[link]] = 1
 
     def release(self) -> None:
         """Open the gripper (and the tail gripper, if any): no link is welded any more."""
@@ -358,13 +497,27 @@ class RopeSim:
         reason = self.invalid_reason()
         if reason is not None:
             return CurveOutcome(False, f"invalid start state: {reason}", 0)
-        path = self.gripper_path(curve)
-        reach = float(np.hypot(*path[-1, :2]))
-        if reach > WORKSPACE_RADIUS_M:
+        pin, placed = curve.pin, 0
+        if pin is not None:
+            pin_end = self._line_path(pin.link, pin.z_max_m, pin.x_m, pin.y_m)[0]
+            if (reason := self._outside(pin_end)) is not None:
+                return CurveOutcome(False, f"pin {reason}", 0)
+            self.grasp_pin(pin.link)
+            if pin.mode == "place":
+                reason, placed = self._place(pin)
+                if reason is not None:
+                    self.release()
+                    return CurveOutcome(False, f"placing the pinned link: {reason}", placed)
+        path, quats, other = (self.gripper_path(curve), None, None)
+        if pin is not None:
+            path, quats, other = self._hand_paths(curve)
+        if (reason := self._outside(path)) is not None:
             # the grasped link would end there: the rope leaves for sure, so do not simulate it
-            return CurveOutcome(False, f"curve target is outside the workspace ({reach:.2f} m out)", 0)
+            self.release()
+            return CurveOutcome(False, f"curve {reason}", placed)
         self.grasp(curve.link)
-        reason, carry_steps = self._carry(curve.link, path)
+        reason, carry_steps = self._carry(curve.link, path, quats=quats, other=other)
+        carry_steps += placed
         self.release()
         if reason is not None:
             return CurveOutcome(False, reason, carry_steps)
@@ -378,21 +531,103 @@ class RopeSim:
         reason = self.invalid_reason()
         return CurveOutcome(reason is None, reason, steps, settle_steps)
 
-    def _carry(self, link: int, path: FloatArray) -> tuple[str | None, int]:
-        """Move the gripper along ``path``, one point per step; (reason to stop or None, steps).
+    def _outside(self, path: FloatArray) -> str | None:
+        """Why a carry along ``path`` is not simulated (its end beyond the workspace), or None."""
+        reach = float(np.hypot(*path[-1, :2]))
+        return f"target is outside the workspace ({reach:.2f} m out)" if reach > WORKSPACE_RADIUS_M else None
+
+    def grasp_pin(self, link: int) -> None:
+        """Put the second hand exactly on ``link`` and weld it there (position and orientation held)."""
+        self._weld_to(self._pin_gripper, self._pin_weld, link)
+
+    def pinned_link(self) -> int | None:
+        """The link the second hand holds now, or None."""
+        held = np.flatnonzero(self.data.eq_active[self._pin_weld])
+        return int(held[0]) if held.size else None
+
+    def _pin_slip(self, link: int, moving: bool) -> str | None:
+        """Why the second hand lost ``link``: it lags the hand by more than :data:`PIN_SLIP_M` (a
+        ``moving`` hand: :data:`MOVING_PIN_SLIP_M`); else None."""
+        d = self.data
+        lag = float(np.linalg.norm(d.mocap_pos[self._pin_gripper] - d.xpos[self._link_body[link]]))
+        limit = MOVING_PIN_SLIP_M if moving else PIN_SLIP_M
+        if lag > limit:
+            return (
+                f"the rope between the hands was pulled taut (pinned link {link} dragged {lag * 1000:.0f} mm "
+                f"from the second hand > {limit * 1000:.0f} mm)"
+            )
+        return None
+
+    def _place(self, pin: Pin) -> tuple[str | None, int]:
+        """Pick, place, hold: carry the pinned link (already grasped by the second hand) by the pin's
+        displacement, then let the rope come to rest with it held; (reason to stop or None, steps)."""
+        path, s = self._line_path(pin.link, pin.z_max_m, pin.x_m, pin.y_m)
+        quats = _turned(self.data.mocap_quat[self._pin_gripper], pin.turn_rad * s)
+        reason, steps = self._carry(pin.link, path, mocap=self._pin_gripper, quats=quats)
+        if reason is not None:
+            return reason, steps
+        reason, settled = self._settle()
+        self.forward()  # the active carry starts from the current kinematics
+        return reason, steps + settled
+
+    def _hand_paths(
+        self, curve: Curve
+    ) -> tuple[FloatArray, FloatArray | None, tuple[int, FloatArray, FloatArray] | None]:
+        """The active gripper's path and orientations (None: kept) for a two-hand curve, and for a pin in
+        mode carry the second hand's (mocap id, path, orientations), both as long."""
+        pin = curve.pin
+        assert pin is not None
+        alone = self._line_duration(pin.z_max_m, pin.x_m, pin.y_m) if pin.mode == "carry" else 0.0
+        quats = None
+        if pin.around:
+            pivot = self.data.xpos[self._link_body[pin.link], :2].copy()
+            path, swept = self._around_path(curve, pivot, pin.around, alone)
+            quats = _turned(self.data.xquat[self._link_body[curve.link]], swept)
+        else:
+            path = self._line_path(curve.link, curve.z_max_m, curve.x_m, curve.y_m, alone)[0]
+        if pin.mode != "carry":
+            return path, quats, None
+        duration = len(path) * self.model.opt.timestep
+        pin_path, s = self._line_path(pin.link, pin.z_max_m, pin.x_m, pin.y_m, duration)
+        pin_quats = _turned(self.data.xquat[self._link_body[pin.link]], pin.turn_rad * s)
+        n = max(len(path), len(pin_path))  # the same duration up to a step of rounding: hold the last point
+        path, pin_path, pin_quats = (_pad(a, n) for a in (path, pin_path, pin_quats))
+        return path, None if quats is None else _pad(quats, n), (self._pin_gripper, pin_path, pin_quats)
+
+    def _carry(
+        self,
+        link: int,
+        path: FloatArray,
+        mocap: int | None = None,
+        quats: FloatArray | None = None,
+        other: tuple[int, FloatArray, FloatArray] | None = None,
+    ) -> tuple[str | None, int]:
+        """Move the gripper (``mocap``, default the active one) along ``path``, one point per step, turned
+        to ``quats`` when given, and ``other``'s gripper (mocap id, path, orientations) with it; (reason to
+        stop or None, steps).
 
         Stops early, to release there, when the grasped link comes down onto another strand: the
         link is let go on top of it rather than pressed through it into the table.
         """
         d = self.data
+        mocap = self._gripper if mocap is None else mocap
         grasped_geom = self._link_geom[link]
         landing_from = len(path) // 2  # only the descending half of the arc may land
         window = self._window_steps
         steps = 0
+        pinned = self.pinned_link()
+        pin_moves = mocap == self._pin_gripper or other is not None
         for k, target in enumerate(path):
-            d.mocap_pos[self._gripper] = target
+            d.mocap_pos[mocap] = target
+            if quats is not None:
+                d.mocap_quat[mocap] = quats[k]
+            if other is not None:
+                d.mocap_pos[other[0]] = other[1][k]
+                d.mocap_quat[other[0]] = other[2][k]
             steps += 1
             if (reason := self.step()) is not None:
+                return reason, steps
+            if pinned is not None and (reason := self._pin_slip(pinned, pin_moves)) is not None:
                 return reason, steps
             if steps % window == 0 and (reason := self.invalid_reason()) is not None:
                 return reason, steps

@@ -34,6 +34,8 @@ from sqlalchemy.engine.url import URL
 from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
+from twisted.store.boundary import parse_json
+
 SQLITE_BUSY_TIMEOUT_MS = 30_000
 SQLITE_HEADER = b"SQLite format 3\x00"
 # Tables an empty SQLite/PostgreSQL database may hold without being "someone else's" database.
@@ -418,7 +420,8 @@ def make_engine(url: URL, readonly: bool = False) -> Engine:
     ``readonly``: every connection only reads (SQLite: the file opened with ``mode=ro``; PostgreSQL:
     read-only transactions).
     """
-    kwargs: dict[str, Any] = {}
+    # every JSON column read back is parsed within bounds of size and depth (twisted.store.boundary)
+    kwargs: dict[str, Any] = {"json_deserializer": parse_json}
     path = sqlite_path(url) if readonly else None
     if path is not None:
         uri = _readonly_uri(path)

@@ -53,6 +53,8 @@ __all__ = [
     "KnotTied",
     "KnotVisits",
     "configurations_per_state",
+    "nodes_per_state",
+    "knot_table",
     "knot_visits",
     "knots_tied",
 ]
@@ -125,18 +127,94 @@ def knots_tied(session: Session) -> list[KnotTied]:
 
 def configurations_per_state(session: Session, keys: Iterable[str]) -> dict[str, int]:
     """How many configurations reached each state (by P-data key); 0 for states never reached."""
+    return _count_per_state(session, keys, Configuration, Configuration.id, Configuration.state_id)
+
+
+# search_nodes read by name (twisted.store.search imports this module): the planner trees' vertices
+_SEARCH_NODES = table(
+    "search_nodes", column("id", Integer), column("state_id", Integer), column("seq", Integer)
+)
+
+
+def nodes_per_state(session: Session, keys: Iterable[str]) -> dict[str, int]:
+    """How many planner tree nodes reached each state (by P-data key), each run's root left out (it is the
+    run's start: the straight rope or a configuration counted already); 0 for states never reached."""
+    n = _SEARCH_NODES.c
+    return _count_per_state(session, keys, _SEARCH_NODES, n.id, n.state_id, n.seq > 0)
+
+
+def _count_per_state(
+    session: Session, keys: Iterable[str], rows_of: Any, counted: Any, state_id: Any, *where: Any
+) -> dict[str, int]:
     wanted = list(dict.fromkeys(keys))
     out = dict.fromkeys(wanted, 0)
     for start in range(0, len(wanted), 500):  # bounded IN lists
         chunk = wanted[start : start + 500]
         rows = session.execute(
-            select(TopologicalState.key, func.count(Configuration.id))
-            .join(Configuration, Configuration.state_id == TopologicalState.id)
-            .where(TopologicalState.key.in_(chunk))
+            select(TopologicalState.key, func.count(counted))
+            .join_from(TopologicalState, rows_of, state_id == TopologicalState.id)
+            .where(TopologicalState.key.in_(chunk), *where)
             .group_by(TopologicalState.key)
         ).all()
-        out.update({key: int(n) for key, n in rows})
+        out.update({key: int(c) for key, c in rows})
     return out
+
+
+def knot_table(store: Any | None, crossings: int | None, max_crossings: int) -> list[dict[str, Any]]:
+    """``twisted knots list``: for each knot of the table (:data:`twisted.knots.CATALOGUE`) its names,
+    invariants and the P-data states that really tie it at ``crossings`` (None: its crossing number; above
+    it they are enumerated up to ``max_crossings``, else ``listed`` is False), each with its visits in
+    ``store``: the configurations collected in it and the planner tree nodes reached in it (None: no store).
+    The states are sorted most visited first; the entries in table order."""
+    from twisted.knots import CATALOGUE, crossing_number, knotinfo_name, shown_name, states_tying
+
+    found: dict[str, list[Any] | None] = {}  # None: not enumerated at that count (see max_crossings)
+    counts: dict[str, int] = {}
+    for knot_type in CATALOGUE:
+        counts[knot_type] = count = crossings if crossings is not None else crossing_number(knot_type)
+        try:
+            found[knot_type] = states_tying(knot_type, count, max_crossings=max_crossings)
+        except ValueError:
+            found[knot_type] = None
+    keys = [p.key for states in found.values() for p in states or ()]
+    configurations: dict[str, int] | None = None
+    nodes: dict[str, int] = {}
+    if store is not None:
+        with store.session() as session:
+            configurations, nodes = configurations_per_state(session, keys), nodes_per_state(session, keys)
+
+    def state(p: Any) -> dict[str, Any]:
+        if configurations is None:
+            return {"p_data": p.to_list(), "configurations": None, "nodes": None, "visits": None}
+        c, n = configurations[p.key], nodes[p.key]
+        return {"p_data": p.to_list(), "configurations": c, "nodes": n, "visits": c + n}
+
+    def total(states: list[dict[str, Any]], what: str) -> int | None:
+        return None if configurations is None else sum(s[what] for s in states)
+
+    entries: list[dict[str, Any]] = []
+    for knot_type, k in CATALOGUE.items():
+        ordered = sorted(found[knot_type] or (), key=lambda p: (-(state(p)["visits"] or 0), p.key))
+        states = [state(p) for p in ordered]
+        entries.append(
+            {
+                "name": shown_name(knot_type),
+                "knot_type": knot_type,
+                "knotinfo": knotinfo_name(knot_type),
+                "alexander": k.alexander_text(),
+                "determinant": k.determinant,
+                "jones": k.jones_text(),
+                "crossing_number": crossing_number(knot_type),
+                "crossings": counts[knot_type],
+                "listed": found[knot_type] is not None,
+                "states": states,
+                "visited_states": None if configurations is None else sum(s["visits"] > 0 for s in states),
+                "configurations": total(states, "configurations"),
+                "nodes": total(states, "nodes"),
+                "visits": total(states, "visits"),
+            }
+        )
+    return entries
 
 
 # --- pull tests (revision 0010) ------------------------------------------------------------------------

@@ -52,8 +52,18 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal, PlanInputError, state_goal
+from twisted.rope import N_LINKS
 from twisted.runtime import process_alive
-from twisted.store.models import Base, Run, TopologicalState, array_to_blob, blob_to_array, utcnow
+from twisted.store.boundary import (
+    StoredValueError,
+    check_checkpoint,
+    get_row,
+    shown,
+    stored_curve,
+    stored_floats,
+    stored_object,
+)
+from twisted.store.models import Base, Run, TopologicalState, array_to_blob, utcnow
 from twisted.store.queries import get_or_create_state
 from twisted.topology import PData, parse_p_data
 
@@ -446,22 +456,13 @@ class DamagedRunError(PlanInputError, LookupError):
 
 
 def _checkpoint(row: SearchCheckpoint | None) -> StoredCheckpoint | None:
+    """A checkpoint as stored, checked at the boundary (StoredValueError naming the field)."""
     if row is None:
         return None
-    return StoredCheckpoint(
-        iteration=row.iteration,
-        elapsed_s=row.elapsed_s,
-        sim_calls=row.sim_calls,
-        nodes=row.nodes,
-        rng_state=_rng_state(json.loads(row.rng_state)),
-        stats=dict(row.stats or {}),
+    iteration, elapsed_s, sim_calls, nodes, rng_state, stats = check_checkpoint(
+        row.run_id, row.iteration, row.elapsed_s, row.sim_calls, row.nodes, row.rng_state, row.stats
     )
-
-
-def _rng_state(state: Any) -> dict[str, Any]:
-    if not isinstance(state, dict):
-        raise ValueError(f"its checkpoint's generator state is {type(state).__name__}, not an object")
-    return state
+    return StoredCheckpoint(iteration, elapsed_s, sim_calls, nodes, rng_state, stats)
 
 
 def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[StoredNode]:
@@ -479,15 +480,15 @@ def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[Stor
         seq_of[row.id] = row.seq
         curve = None
         if row.link is not None:  # the curve columns are NULL together (root) or set together
-            curve = (row.link, float(row.z_max_m or 0.0), float(row.x_m or 0.0), float(row.y_m or 0.0))
+            curve = stored_curve(row.link, row.z_max_m, row.x_m, row.y_m, N_LINKS, "search_nodes", row.id)
         out.append(
             StoredNode(
                 id=row.id,
                 seq=row.seq,
                 parent_seq=None if row.parent_id is None else seq_of.get(row.parent_id),
-                p_data=parse_p_data(key),
-                q=blob_to_array(row.q),
-                points=blob_to_array(row.points, (-1, 3)),
+                p_data=_state(key, row.state_id),
+                q=stored_floats(row.q, "search_nodes", row.id, "q"),
+                points=stored_floats(row.points, "search_nodes", row.id, "points", width=3),
                 curve=curve,
                 iteration=row.iteration,
                 sim_call=row.sim_call,
@@ -502,28 +503,30 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
     """A planner run, or None when ``run_id`` is not one. ``with_nodes`` loads the whole tree."""
     with store.session() as session:
         row = session.get(SearchRunRow, run_id)
-        run = session.get(Run, run_id)
+        run = get_row(session, Run, run_id)  # the boundary: JSON bounded, a bad column named
         if row is None or run is None:
             return None
         goal_key = session.scalar(
             select(TopologicalState.key).where(TopologicalState.id == row.goal_state_id)
         )
-        checkpoint_row = session.get(SearchCheckpoint, run_id)
-        try:  # JSON and float64 arrays: data only, never code (docs/security.md); damage is refused
-            checkpoint = _checkpoint(checkpoint_row)
+        checkpoint_row = get_row(session, SearchCheckpoint, run_id)
+        checkpoint = _checkpoint(checkpoint_row)
+        try:  # float64 arrays: data only, never code (docs/security.md); damage is refused
             nodes = _nodes(session, run_id) if with_nodes else []
+        except StoredValueError:
+            raise
         except (ValueError, TypeError, UnicodeDecodeError) as exc:
             raise DamagedRunError(
                 f"planner run {run_id} is damaged in the database ({type(exc).__name__}: "
                 f"{str(exc)[:200]}): it cannot be resumed or replayed"
             ) from None
-        parameters = dict(run.parameters or {})
+        parameters = stored_object(run.parameters, "runs", run_id, "parameters")
         if row.goal_knot is not None:
-            members = [parse_p_data(p) for p in parameters.get("goal_states", [])]
+            members = _goal_states(parameters.get("goal_states"), run_id)
             members.sort(key=lambda p: p.key)
             goal = Goal(tuple(members), knot=row.goal_knot, crossings=row.goal_cross)
         else:
-            goal = state_goal(parse_p_data(goal_key or "[]"))
+            goal = state_goal(_state(goal_key or "[]", row.goal_state_id))
         return SearchRunInfo(
             run_id=run_id,
             goal=goal,
@@ -538,6 +541,26 @@ def load_run(store: Any, run_id: int, with_nodes: bool = True) -> SearchRunInfo 
             pid=run.pid,
             last_write=checkpoint_row.updated_at if checkpoint_row is not None else None,
         )
+
+
+def _state(key: Any, state_id: int) -> PData:
+    """A node's state (``topological_states.key``) read back."""
+    try:
+        return parse_p_data(key)
+    except (ValueError, TypeError) as exc:
+        raise StoredValueError("topological_states", state_id, "key", str(exc)[:200]) from None
+
+
+def _goal_states(value: Any, run_id: int) -> list[PData]:
+    """The members of a knot goal as stored (``runs.parameters.goal_states``): a list of P-data."""
+    field = "parameters.goal_states"
+    if not isinstance(value, list) or not value:
+        problem = f"must be a non-empty list of P-data, got {shown(value)}"
+        raise StoredValueError("runs", run_id, field, problem)
+    try:
+        return [parse_p_data(p) for p in value]
+    except ValueError as exc:
+        raise StoredValueError("runs", run_id, field, str(exc)[:200]) from None
 
 
 def mark_failed(store: Any, run_id: int | None, message: str) -> None:

@@ -1,0 +1,332 @@
+"""Episodes (docs/DESIGN.md section 15): a stored plan executed in a world, observed, replanned, resumed.
+
+The planner here is ``random-low`` toward one crossing (seconds, no model to load); the worlds and the
+simulation are real everywhere.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from sqlalchemy import func, select
+from typer.testing import CliRunner
+
+from cli.main import app
+from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
+from twisted.experiments.robustness import FINISHED, robustness_table
+from twisted.planner import stored_options
+from twisted.store import open_store
+from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
+from twisted.store.models import Run
+from twisted.store.search import load_run
+from twisted.world import LEVELS, SimWorld, World
+
+ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, int]:
+    """A database holding one solved planner run toward one crossing (random-low, seed 0)."""
+    db = f"sqlite:///{tmp_path_factory.mktemp('episodes') / 'twisted.db'}"
+    args = ["--db", db, "plan", "--goal", ONE_CROSSING, "--planner", "random-low", "--workers", "1"]
+    result = runner.invoke(app, [*args, "--timeout", "120", "--json"])
+    assert result.exit_code == 0, result.output
+    return db, int(json.loads(result.output)["run_id"])
+
+
+def _execute(db: str, *args: str) -> tuple[int, str]:
+    result = runner.invoke(app, ["--db", db, "execute", *args])
+    return result.exit_code, result.output
+
+
+def _count(db: str, model: Any) -> int:
+    with open_store(db) as store, store.session() as session:
+        return int(session.scalar(select(func.count()).select_from(model)) or 0)
+
+
+@pytest.mark.parametrize(
+    "level",
+    ["hurricane", "moderate,friction=-0.5:1", "moderate,observation_noise_m=1", "none,lift_noise_m=x"],
+)
+def test_a_level_that_makes_no_sense_is_refused_before_anything_is_written(
+    tmp_path: Path, planned: tuple[str, int], level: str
+) -> None:
+    new = tmp_path / "new.db"
+    code, out = _execute(f"sqlite:///{new}", "1", "--world", level)
+    assert code == 2 and "--world" in out
+    assert not new.exists()
+    db, run_id = planned
+    runs = _count(db, Run)
+    code, out = _execute(db, str(run_id), "--world", level, "--closed-loop")
+    assert code == 2 and "--world" in out
+    assert _count(db, Run) == runs
+    result = runner.invoke(app, ["--db", f"sqlite:///{new}", "tie", "--knot", "overhand", "--world", level])
+    assert result.exit_code == 2 and not new.exists()
+
+
+def _observations(db: str, episode: int) -> list[bytes]:
+    with open_store(db) as store, store.session() as session:
+        rows = session.scalars(
+            select(EpisodeStep.points).where(EpisodeStep.episode_id == episode).order_by(EpisodeStep.seq)
+        )
+        return [p for p in rows if p is not None]
+
+
+def test_an_episode_is_stored_and_the_same_seed_gives_the_same_observations(planned: tuple[str, int]) -> None:
+    db, run_id = planned
+    outcomes = []
+    for _ in range(2):
+        code, out = _execute(db, str(run_id), "--world", "moderate", "--seed", "4", "--json")
+        assert code in (0, 3), out
+        outcomes.append(json.loads(out))
+    first, second = (o["episode"] for o in outcomes)
+    assert _observations(db, first) == _observations(db, second)
+    with open_store(db) as store:
+        stored = load_episode(store, first)
+        assert stored.plan_run_id == run_id and stored.world_seed == 4 and not stored.closed_loop
+        assert stored.level_ranges == LEVELS["moderate"].to_dict()
+        kinds = [s.kind for s in stored.steps]
+        assert kinds[0] == "reset" and kinds[-1] == "pull_test"
+        assert kinds.count("curve") == outcomes[0]["actions"] == len(plan_of_run(store, run_id).steps)
+        with store.session() as session:
+            row = session.get(EpisodeRow, first)
+            assert row is not None and set(row.physics) == {
+                "friction",
+                "stiffness",
+                "damping",
+                "mass",
+                "radius_m",
+            }
+            assert row.outcome == outcomes[0]["outcome"]
+    other = _execute(db, str(run_id), "--world", "moderate", "--seed", "5", "--json")[1]
+    assert _observations(db, json.loads(other)["episode"]) != _observations(db, first)
+
+
+class Spy:
+    """Delegates to a world and records which of its attributes the episode used."""
+
+    def __init__(self, world: SimWorld) -> None:
+        self._world = world
+        self.used: set[str] = set()
+
+    def __getattr__(self, name: str) -> Any:
+        self.used.add(name)
+        return getattr(self._world, name)
+
+
+class SeenByPlanner(ModelPlanner):
+    """The model planner, recording what each replan was given."""
+
+    given: list[tuple[Any, ...]]
+
+    def replan(self, points: Any, seed: int, timeout_s: float) -> Any:
+        self.given.append((points, seed, timeout_s))
+        return super().replan(points, seed, timeout_s)
+
+
+def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
+    store = open_store(db)
+    info = load_run(store, run_id, with_nodes=False)
+    assert info is not None
+    return store, info.goal, stored_options(info.parameters), plan_of_run(store, run_id)
+
+
+def _episode_row(store: Any, level: str, seed: int, plan: Any, closed_loop: bool) -> int:
+    from twisted.store.episodes import create_episode
+
+    world_level = LEVELS[level]
+    return create_episode(
+        store,
+        {"drift_m": 0.001, "workers": 1, "level": world_level.to_dict()},
+        plan_run_id=plan.run_id,
+        goal_knot="0_1",
+        level=level,
+        level_ranges=world_level.to_dict(),
+        world_seed=seed,
+        physics=SimWorld(world_level, seed).physics.to_dict(),
+        closed_loop=closed_loop,
+        timeout_s=120.0,
+        max_actions=4,
+    )
+
+
+def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
+    db, run_id = planned
+    store, goal, options, plan = _parts(db, run_id)
+    episode_id = _episode_row(store, "strong", 3, plan, True)
+    world = Spy(SimWorld(LEVELS["strong"], 3))
+    planner = SeenByPlanner(store, goal, options, None, 1, episode_id)
+    planner.given = []
+    # a drift of 1 mm: every action is off plan, so the episode replans after each one
+    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=2, drift_m=0.001)
+    try:
+        episode = Episode(store, episode_id, world, goal, planner, settings)
+        result = episode.run(episode.begin(plan))
+    finally:
+        planner.close()
+        store.close()
+    assert result.replans >= 1 and planner.given
+    protocol = {name for name in dir(World) if not name.startswith("_")}
+    assert world.used <= protocol, world.used - protocol
+    for points, seed, timeout_s in planner.given:
+        assert isinstance(points, np.ndarray) and points.shape == (22, 3)
+        assert isinstance(seed, int) and isinstance(timeout_s, float)
+    # the replans start from configurations fitted to observations, stored under the episode's run
+    with open_store(db) as store:
+        stored = load_episode(store, episode_id)
+        replans = [s for s in stored.steps if s.kind == "replan"]
+        assert len(replans) == result.replans and all(s.fit_residual_m is not None for s in replans)
+        for step in replans:
+            if step.replan_run_id is not None:
+                info = load_run(store, step.replan_run_id, with_nodes=False)
+                assert info is not None and info.start_configuration_id is not None
+                assert info.parameters["episode"] == episode_id
+
+
+def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:
+    db, run_id = planned
+    code, out = _execute(db, str(run_id), "--world", "strong", "--seed", "9", "--json")
+    assert code in (0, 3), out
+    whole = json.loads(out)
+    store, goal, options, plan = _parts(db, run_id)
+    episode_id = _episode_row(store, "strong", 9, plan, False)
+    calls = [0]
+
+    def stop_after_the_first_action() -> bool:  # what a Ctrl-C between two actions does
+        calls[0] += 1
+        return calls[0] > 1
+
+    planner = ModelPlanner(store, goal, options, None, 1, episode_id)
+    settings = EpisodeSettings(closed_loop=False, timeout_s=120.0, max_actions=30, drift_m=0.05)
+    episode = Episode(
+        store, episode_id, SimWorld(LEVELS["strong"], 9), goal, planner, settings, stop_after_the_first_action
+    )
+    stopped = episode.run(episode.begin(plan))
+    store.close()
+    assert stopped.outcome == "interrupted" and stopped.actions == 1
+    with open_store(db) as store, store.session() as session:
+        run = session.get(Run, episode_id)
+        assert run is not None and run.status == "interrupted"
+    code, out = _execute(db, "--resume", str(episode_id), "--json")
+    assert code in (0, 3), out
+    resumed = json.loads(out)
+    assert resumed["episode"] == episode_id and resumed["outcome"] == whole["outcome"]
+    assert resumed["actions"] == whole["actions"]
+    # the same observations as the episode that was never stopped
+    assert _observations(db, episode_id) == _observations(db, whole["episode"])
+    code, out = _execute(db, "--resume", str(episode_id))
+    assert code == 2 and "has ended" in out
+    code, out = _execute(db, "--resume", str(episode_id), "--world", "none")
+    assert code == 2 and "drop --world" in out
+
+
+def test_report_tables_and_plots_the_episodes_by_level(planned: tuple[str, int], tmp_path: Path) -> None:
+    db, run_id = planned
+    for level in ("none", "strong"):
+        code, out = _execute(db, str(run_id), "--world", level, "--seed", "11", "--json")
+        assert code in (0, 3), out
+    with open_store(db) as store:
+        table = {(r.level, r.closed_loop): r for r in robustness_table(store)}
+        finished = [o for o in load_levels(store) if o[1] in FINISHED]
+    assert {("none", False), ("strong", False)} <= set(table)
+    assert sum(r.episodes for r in table.values()) == len(finished)
+    assert table[("none", False)].tied >= 1  # the model's own rope ties what the model planned
+    result = runner.invoke(app, ["--db", db, "report", "--out", str(tmp_path / "report")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "report" / "robustness.png").stat().st_size > 0
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Robustness" in text and "| 0_1 | none | open |" in text
+
+
+def load_levels(store: Any) -> list[tuple[str, str]]:
+    with store.session() as session:
+        return [(r.level, r.outcome) for r in session.execute(select(EpisodeRow.level, EpisodeRow.outcome))]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--levels", "moderate,hurricane"],
+        ["--levels", "moderate,moderate"],
+        ["--loops", "sideways"],
+        ["--knot", "granny-knot-of-doom"],
+        ["--drift", "-1"],
+    ],
+)
+def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path, args: list[str]) -> None:
+    new = tmp_path / "new.db"
+    knot = [] if "--knot" in args else ["--knot", "overhand"]
+    result = runner.invoke(app, ["--db", f"sqlite:///{new}", "robustness", *knot, *args])
+    assert result.exit_code == 2, result.output
+    assert not new.exists()
+
+
+def test_the_browse_query_lists_an_episode_as_its_observed_ropes(planned: tuple[str, int]) -> None:
+    import sqlite3
+
+    from twisted.browse.queries import EPISODE, QUERIES
+
+    db, run_id = planned
+    code, out = _execute(db, str(run_id), "--world", "mild", "--seed", "2", "--json")
+    assert code in (0, 3), out
+    episode = json.loads(out)["episode"]
+    assert QUERIES["episode"]["sql"] == EPISODE
+    with sqlite3.connect(db.removeprefix("sqlite:///")) as conn:
+        cursor = conn.execute(EPISODE, {"episode": episode, "page": ""})
+        columns = [c[0] for c in cursor.description]
+        rows = cursor.fetchall()
+    assert {"state", "points", "kind", "expected_key"} <= set(columns)
+    assert [r[columns.index("kind")] for r in rows][0] == "reset"
+    assert all(r[columns.index("points")] is not None for r in rows if r[columns.index("kind")] != "replan")
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_an_episode_with_exit_130_and_it_resumes(planned: tuple[str, int]) -> None:
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    db, run_id = planned
+    path = db.removeprefix("sqlite:///")
+    with sqlite3.connect(path) as conn:
+        before = conn.execute("SELECT COALESCE(MAX(run_id), 0) FROM episodes").fetchone()[0]
+    # a drift of 1 mm: every action is off plan, so the episode replans (and runs long enough to stop)
+    args = ["--db", db, "execute", str(run_id), "--world", "strong", "--seed", "3", "--closed-loop"]
+    budget = ["--drift", "0.001", "--timeout", "30", "--json"]  # the resumed episode keeps the budget
+    command = [sys.executable, "-c", "from cli.main import run; run()", *args, *budget]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        steps = 0
+        while steps < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            with sqlite3.connect(path, timeout=5) as conn:
+                steps = conn.execute(
+                    "SELECT COUNT(*) FROM episode_steps WHERE episode_id > ?", (before,)
+                ).fetchone()[0]
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    stopped = json.loads(out)
+    assert stopped["outcome"] == "interrupted" and "--resume" in err
+    episode = stopped["episode"]
+    with open_store(db) as store:
+        kept = len(load_episode(store, episode).steps)
+    code, out = _execute(db, "--resume", str(episode), "--json")
+    assert code in (0, 3), out
+    resumed = json.loads(out)
+    assert resumed["episode"] == episode and resumed["outcome"] != "interrupted"
+    with open_store(db) as store:
+        steps_after = load_episode(store, episode).steps
+    assert len(steps_after) > kept and resumed["actions"] >= stopped["actions"]

@@ -1,0 +1,160 @@
+"""The world apart from the planner's model (docs/DESIGN.md section 15): levels, SimWorld, the chain fit."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from twisted.sim import Curve, RopeSim, sample_curve
+from twisted.sim.mjcf import RopeParams
+from twisted.world import (
+    LEVELS,
+    ChainFit,
+    LevelError,
+    Observation,
+    SimWorld,
+    World,
+    observed_p_data,
+    parse_level,
+)
+
+CURVES = [Curve(5, 0.03, 0.1, 0.2), Curve(14, 0.05, -0.15, -0.1), Curve(3, 0.02, 0.2, -0.05)]
+
+
+def test_levels_grow_from_none_to_strong() -> None:
+    none, mild, moderate, strong = (LEVELS[n] for n in ("none", "mild", "moderate", "strong"))
+    assert none.friction == (1.0, 1.0) and none.observation_noise_m == 0.0
+    assert mild.friction == (0.95, 1.05) and mild.carry_noise_m == 0.0
+    for name in ("friction", "stiffness", "damping", "mass", "radius_m"):
+        assert getattr(strong, name)[0] <= getattr(moderate, name)[0] <= getattr(moderate, name)[1]
+        assert getattr(moderate, name)[1] <= getattr(strong, name)[1]
+    assert moderate.observation_noise_m < strong.observation_noise_m
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "hurricane",
+        "moderate,friction=-0.5:1",
+        "moderate,observation_noise_m=1",
+        "none,carry_noise_m=nan",
+        "none,friction=2:1",
+        "none,grasp_off_by_one_p=0.9",
+        "none,radius_m=0.001",
+        "none,colour=3",
+        "none,friction=a:b",
+    ],
+)
+def test_a_level_that_makes_no_sense_is_refused(text: str) -> None:
+    with pytest.raises(LevelError):
+        parse_level(text)
+
+
+def test_a_level_with_overrides_is_checked_and_stored_whole() -> None:
+    level = parse_level("moderate,friction=0.5:2,observation_noise_m=0.003")
+    assert level.friction == (0.5, 2.0) and level.observation_noise_m == 0.003
+    assert level.stiffness == LEVELS["moderate"].stiffness
+    assert type(level).from_dict(level.to_dict()) == level
+    with pytest.raises(LevelError):
+        type(level).from_dict({**level.to_dict(), "carry_noise_m": 5.0})
+
+
+def _episode(level: str, seed: int) -> tuple[SimWorld, list[np.ndarray]]:
+    world = SimWorld(LEVELS[level], seed)
+    seen = [world.reset().points]
+    seen += [world.execute(curve).points for curve in CURVES]
+    return world, seen
+
+
+def test_the_same_seed_gives_the_same_world_and_the_same_observations() -> None:
+    a, seen_a = _episode("moderate", 7)
+    b, seen_b = _episode("moderate", 7)
+    c, seen_c = _episode("moderate", 8)
+    assert a.physics == b.physics and a.physics != c.physics
+    assert a.sent == b.sent
+    for x, y in zip(seen_a, seen_b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert any(not np.array_equal(x, y) for x, y in zip(seen_a, seen_c, strict=True))
+
+
+def test_level_none_is_the_planners_model() -> None:
+    world, seen = _episode("none", 3)
+    model = RopeSim()
+    for curve, points in zip(CURVES, seen[1:], strict=True):
+        assert model.apply(curve).ok
+        np.testing.assert_allclose(points, model.link_points(), atol=1e-9)
+    assert world.sent == CURVES
+
+
+def test_moderate_world_differs_from_the_model_in_physics_actions_and_observations() -> None:
+    world = SimWorld(LEVELS["moderate"], 1)
+    assert world.physics.rope_params() != RopeParams()
+    first = world.reset()
+    again = world.observe()
+    assert not np.array_equal(first.points, again.points)  # the camera's noise
+    assert np.abs(first.points - world.true_points()).max() < 6 * LEVELS["moderate"].observation_noise_m
+
+
+def test_a_world_is_restored_from_its_checkpoint() -> None:
+    world = SimWorld(LEVELS["moderate"], 5)
+    world.reset()
+    world.execute(CURVES[0])
+    saved = world.checkpoint()
+    later = [world.execute(c).points for c in CURVES[1:]]
+    other = SimWorld(LEVELS["moderate"], 5)
+    other.restore(saved)
+    for curve, points in zip(CURVES[1:], later, strict=True):
+        np.testing.assert_array_equal(other.execute(curve).points, points)
+
+
+def test_sim_world_is_a_world() -> None:
+    assert isinstance(SimWorld(LEVELS["none"], 0), World)
+    assert [f.name for f in dataclasses.fields(Observation)] == ["points", "fault"]
+
+
+def test_fitting_the_exact_points_of_a_configuration_returns_it() -> None:
+    sim, fit, rng = RopeSim(), ChainFit(), np.random.default_rng(2)
+    fitted = 0
+    while fitted < 4:
+        before = sim.state()
+        if not sim.apply(sample_curve(rng)).ok:
+            sim.set_state(before)
+            continue
+        q, points = sim.state(), sim.link_points()
+        result = fit.fit(points)
+        fitted += 1
+        assert result.residual_m < 1e-9
+        np.testing.assert_allclose(result.points, points, atol=1e-9)
+        np.testing.assert_allclose(result.q[:3], q[:3], atol=1e-12)  # the middle link's centre
+        assert np.all(result.q[47:] == 0.0)
+        # the bend at every joint (the angle between neighbouring links) is the configuration's; the
+        # links' roll about their own axes is not seen in points (docs/DESIGN.md section 15.4)
+        sim.set_state(result.q)
+        np.testing.assert_allclose(sim.link_points(), points, atol=1e-9)
+        assert observed_p_data(result.points) == observed_p_data(points)
+
+
+def test_fitting_noisy_points_stays_within_the_noise() -> None:
+    world = SimWorld(LEVELS["moderate"], 4)
+    world.reset()
+    seen = world.execute(CURVES[0])
+    result = ChainFit().fit(seen.points)
+    assert result.residual_m < 4 * LEVELS["moderate"].observation_noise_m
+    rest = ChainFit().at_rest(result)
+    assert rest is not None and rest[2] == observed_p_data(world.true_points())
+
+
+def test_a_fit_pressed_through_a_strand_is_stretched_until_the_model_takes_it() -> None:
+    sim = RopeSim()
+    assert sim.apply(Curve(2, 0.0308, 0.4662, 0.0664)).ok  # one crossing, the head over
+    points = sim.link_points()
+    crossing = observed_p_data(points)
+    assert crossing.cross == 1
+    pressed = points.copy()
+    pressed[pressed[:, 2] > 0.015, 2] = 0.016  # the upper strand seen 6 mm above the lower one's centre
+    fit = ChainFit()
+    assert fit.at_rest(fit.fit(pressed)) is None  # 14 mm into the lower strand: rejected
+    first, rest = fit.rest_configuration(pressed)
+    assert first.residual_m > 0 and rest is not None and rest[2] == crossing

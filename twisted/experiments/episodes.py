@@ -1,0 +1,482 @@
+"""Episodes: a plan made in the planner's model, executed in a world, observed and (closed loop) replanned.
+
+docs/DESIGN.md section 15. Open loop sends the plan's curves to the world one after another and pulls the
+rope at the end. Closed loop, after every action, reads the observation's P-data and compares it and its
+points with the plan's next node; when the state is another, the points lie further than ``drift_m`` (RMS)
+from the plan's, or the world reports a fault, it plans again in the planner's model from a configuration
+fitted to the observed points (:class:`ModelPlanner`), and it pulls the rope as soon as the observed state
+is one of the goal's. The episode ends when the world's rope passes the pull test for the goal's knot,
+or when the budget (``timeout_s`` of wall time, planning included, and ``max_actions``) is spent.
+
+The planner sees only observations: :class:`ModelPlanner.replan` takes link points, nothing of the world.
+Every step is stored (:mod:`twisted.store.episodes`) with the world's checkpoint, so that an episode
+stopped by Ctrl-C continues from its last stored observation (:func:`resume_state`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from twisted.goals import Goal, PlanInputError
+from twisted.runtime import StopSignals
+from twisted.topology import PData, PDataError, top
+
+logger = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+# A plan made for a rope whose points lie more than this (RMS) from the observed ones is another rope's
+# plan: the next curve's displacement still applies, but the inverse model chose it for other geometry.
+# Three link spacings' worth of RMS is well outside the camera's noise at every level (<= 5 mm) and inside
+# what one curve moves a rope (docs/DESIGN.md section 15.4).
+DEFAULT_DRIFT_M = 0.05
+DEFAULT_MAX_ACTIONS = 30
+# A rope that keeps failing the pull test while it looks tied (the pull itself fails) is not pulled forever.
+MAX_PULLS = 3
+# What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
+# camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
+FIT_IN_GOAL = "the fit is in the goal"
+
+
+@dataclass(frozen=True)
+class PlanStep:
+    """One node of a low-level plan: the action that leads to it (a curve as ``(link, z, x, y)``, None for
+    a cinch), and the state and link points the model says it ends in."""
+
+    curve: tuple[int, float, float, float] | None
+    p_data: PData
+    points: FloatArray
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A solved planner run's plan: the root's configuration, then the steps (root excluded)."""
+
+    run_id: int
+    root_q: FloatArray
+    steps: tuple[PlanStep, ...]
+
+
+def plan_of_run(store: Any, run_id: int) -> Plan:
+    """The plan of a solved planner run (PlanInputError when there is none)."""
+    from twisted.store.search import NoPlanError, solved_run
+
+    try:
+        _, path = solved_run(store, run_id)
+    except NoPlanError as exc:
+        raise PlanInputError(str(exc)) from None
+    steps = tuple(
+        PlanStep(None if node.action == "cinch" else node.curve, node.p_data, node.points)
+        for node in path[1:]
+    )
+    return Plan(run_id, path[0].q, steps)
+
+
+@dataclass
+class Replan:
+    """What one replan gave: its planner run (None when the observation could not be made a configuration
+    of the model: ``reason``), the plan when solved, seconds, the fit's residual."""
+
+    run_id: int | None
+    plan: Plan | None
+    planning_s: float
+    fit_residual_m: float | None
+    reason: str | None = None
+
+
+class ModelPlanner:
+    """Plans in the planner's model from observed link points (what the world shows, nothing else).
+
+    Each search is the library's :func:`twisted.planner.run_search` (one :class:`SearchRequest`: the goal,
+    the start, the options with the replan's seed); the simulator workers and the model are started once
+    for all of them (:class:`twisted.planner.SearchResources`), until :meth:`close`."""
+
+    def __init__(
+        self,
+        store: Any,
+        goal: Goal,
+        options: Any,
+        model_id: int | None,
+        workers: int = 1,
+        episode_run_id: int | None = None,
+        stop: StopSignals | None = None,
+    ) -> None:
+        from twisted.planner import SearchResources
+
+        self.store, self.goal, self.options, self.model_id = store, goal, options, model_id
+        self.workers, self.episode_run_id, self.stop = workers, episode_run_id, stop
+        self._resources = SearchResources()
+        self._fit: Any = None
+
+    def close(self) -> None:
+        self._resources.close()
+
+    def search(self, start_configuration_id: int | None, seed: int, timeout_s: float) -> tuple[int, bool]:
+        """One search of the goal from a stored configuration (None: the straight rope); (run id, solved)."""
+        from twisted.planner import SearchRequest, run_search
+
+        request = SearchRequest(
+            goal=self.goal.spec,
+            options={**self.options.to_dict(), "seed": seed},
+            start_config=start_configuration_id,
+            model_id=self.model_id,
+            workers=self.workers,
+            timeout_s=timeout_s,
+            parameters={"episode": self.episode_run_id},
+            timed_setup=False,  # the replan's wall time (planning_s) counts it; a signal stops the search
+        )
+        result = run_search(self.store, request, self.stop, resources=self._resources)
+        assert result.run_id is not None  # a started search has its run
+        return int(result.run_id), bool(result.solved)
+
+    def replan(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
+        """Fit the model's chain to observed ``points``, let it rest in the model, store it as a
+        configuration and search from there."""
+        from twisted.store.queries import add_configuration
+        from twisted.world import ChainFit
+
+        started = time.perf_counter()
+        if self._fit is None:
+            self._fit = ChainFit()
+        try:
+            fit, rest = self._fit.rest_configuration(points)
+        except ValueError as exc:
+            return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}")
+        if rest is None:
+            return Replan(
+                None, None, time.perf_counter() - started, fit.residual_m, "the model rejects the fit"
+            )
+        q, fitted_points, p_data = rest
+        if p_data in self.goal:
+            # the fit of a goal state: nothing to plan (the episode pulls the rope)
+            return Replan(None, None, time.perf_counter() - started, fit.residual_m, FIT_IN_GOAL)
+        with self.store.session(write=True) as session:
+            configuration = add_configuration(
+                session, run_id=self.episode_run_id, p_data=p_data, q=q, points=fitted_points
+            )
+            configuration_id = int(configuration.id)
+        remaining = max(timeout_s - (time.perf_counter() - started), 1.0)
+        try:
+            run_id, solved = self.search(configuration_id, seed, remaining)
+        except PlanInputError as exc:
+            return Replan(None, None, time.perf_counter() - started, fit.residual_m, str(exc))
+        plan = plan_of_run(self.store, run_id) if solved else None
+        return Replan(run_id, plan, time.perf_counter() - started, fit.residual_m)
+
+
+@dataclass
+class EpisodeSettings:
+    closed_loop: bool
+    timeout_s: float
+    max_actions: int = DEFAULT_MAX_ACTIONS
+    drift_m: float = DEFAULT_DRIFT_M
+
+
+@dataclass
+class EpisodeState:
+    """Where an episode stands: what it last saw, the plan it follows and its counters."""
+
+    points: FloatArray
+    plan: Plan | None
+    position: int  # index into plan.steps of the next action
+    actions: int = 0
+    replans: int = 0
+    planning_s: float = 0.0
+    elapsed_s: float = 0.0
+    replan_runs: list[int] = field(default_factory=list)
+    pulls: int = 0
+    fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
+
+
+@dataclass
+class EpisodeResult:
+    run_id: int
+    outcome: str
+    actions: int
+    replans: int
+    planning_s: float
+    elapsed_s: float
+    final_knot: str | None
+    replan_runs: list[int]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "episode": self.run_id,
+            "outcome": self.outcome,
+            "tied": self.outcome == "tied",
+            "actions": self.actions,
+            "replans": self.replans,
+            "planning_s": round(self.planning_s, 3),
+            "elapsed_s": round(self.elapsed_s, 3),
+            "final_knot": self.final_knot,
+            "replan_runs": self.replan_runs,
+        }
+
+
+def _observed(points: FloatArray) -> PData | None:
+    try:
+        return top(points)
+    except PDataError:
+        return None
+
+
+def _drift(points: FloatArray, step: PlanStep) -> float:
+    return float(np.sqrt(np.mean(np.sum((points - step.points) ** 2, axis=1))))
+
+
+class Episode:
+    """Runs one episode of ``world`` toward ``goal``, storing every step (see the module's docstring)."""
+
+    def __init__(
+        self,
+        store: Any,
+        run_id: int,
+        world: Any,
+        goal: Goal,
+        planner: ModelPlanner,
+        settings: EpisodeSettings,
+        stop: Callable[[], bool] = lambda: False,
+        progress: Callable[[str], None] | None = None,
+    ) -> None:
+        self.store, self.run_id, self.world, self.goal = store, run_id, world, goal
+        self.planner, self.settings, self.stop = planner, settings, stop
+        self.progress = progress or (lambda line: None)
+        self._clock = 0.0
+        self._started = time.perf_counter()
+
+    # ---- bookkeeping ----------------------------------------------------------------------------------
+
+    def _elapsed(self, state: EpisodeState) -> float:
+        return state.elapsed_s + (time.perf_counter() - self._started)
+
+    def _record(self, state: EpisodeState, kind: str, **values: Any) -> None:
+        from twisted.store.episodes import StepRecord, add_step
+
+        elapsed = self._elapsed(state)
+        if "plan_run_id" not in values and state.plan is not None:
+            values.update(plan_run_id=state.plan.run_id, plan_step=state.position)
+        step = StepRecord(kind=kind, elapsed_s=elapsed, **values)
+        counters = {
+            "actions": state.actions,
+            "replans": state.replans,
+            "planning_s": state.planning_s,
+            "elapsed_s": elapsed,
+        }
+        add_step(self.store, self.run_id, step, counters)
+
+    def _observation(self, points: FloatArray) -> dict[str, Any]:
+        observed = _observed(points)
+        return {"points": points, "observed_key": None if observed is None else observed.key}
+
+    # ---- the episode ----------------------------------------------------------------------------------
+
+    def begin(self, plan: Plan) -> EpisodeState:
+        """Lay the world's rope out as the plan's root and observe it (the episode's first step)."""
+        seen = self.world.reset(plan.root_q)
+        state = EpisodeState(seen.points, plan, 0)
+        self._record(
+            state, "reset", **self._observation(seen.points), world_checkpoint=self.world.checkpoint()
+        )
+        return state
+
+    def run(self, state: EpisodeState) -> EpisodeResult:
+        """Act, observe and (closed loop) replan until tied, out of budget or stopped; stores the outcome."""
+        from twisted.store.episodes import finish_episode
+
+        self._started = time.perf_counter()
+        outcome, knot = self._loop(state)
+        finish_episode(self.store, self.run_id, outcome, knot, self._elapsed(state))
+        elapsed = self._elapsed(state)
+        return EpisodeResult(
+            self.run_id,
+            outcome,
+            state.actions,
+            state.replans,
+            state.planning_s,
+            elapsed,
+            knot,
+            state.replan_runs,
+        )
+
+    def _loop(self, state: EpisodeState) -> tuple[str, str | None]:
+        s = self.settings
+        knot: str | None = None
+        while True:
+            if self.stop():
+                return "interrupted", knot
+            remaining = s.timeout_s - self._elapsed(state)
+            if remaining <= 0:
+                return "out_of_budget", knot
+            observed = _observed(state.points)
+            plan_done = state.plan is None or state.position >= len(state.plan.steps)
+            in_goal = state.fit_in_goal or (observed is not None and observed in self.goal)
+            if in_goal if s.closed_loop else plan_done:
+                state.fit_in_goal = False
+                knot = self._pull(state)
+                if self.goal.tightened_ties(knot):
+                    return "tied", knot
+                if not s.closed_loop or state.pulls >= MAX_PULLS:
+                    return "not_tied", knot
+                state.plan = None
+                continue
+            if plan_done or state.plan is None:
+                replanned = self._replan(state, remaining)
+                if replanned is not None:
+                    return replanned, knot
+                continue
+            if state.actions >= s.max_actions:
+                return "out_of_budget", knot
+            self._act(state)
+
+    def _pull(self, state: EpisodeState) -> str | None:
+        verdict = self.world.pull_test()
+        state.pulls += 1
+        seen = self.world.observe()
+        state.points = seen.points
+        self.progress(f"pull test: {verdict.knot or verdict.reason}")
+        self._record(
+            state,
+            "pull_test",
+            **self._observation(seen.points),
+            knot=verdict.knot,
+            fault=verdict.reason,
+            world_checkpoint=self.world.checkpoint(),
+        )
+        return verdict.knot  # type: ignore[no-any-return]
+
+    def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
+        """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
+        seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
+        replanned = self.planner.replan(state.points, seed, remaining_s)
+        state.replans += 1
+        state.planning_s += replanned.planning_s
+        if replanned.run_id is not None:
+            state.replan_runs.append(replanned.run_id)
+        state.plan, state.position = replanned.plan, 0
+        self.progress(
+            f"replan {state.replans}: run {replanned.run_id}, "
+            f"{'solved' if replanned.plan else replanned.reason or 'not solved'} "
+            f"in {replanned.planning_s:.1f} s"
+        )
+        self._record(
+            state,
+            "replan",
+            replan_run_id=replanned.run_id,
+            planning_s=replanned.planning_s,
+            fit_residual_m=replanned.fit_residual_m,
+            fault=replanned.reason,
+            plan_run_id=None if replanned.plan is None else replanned.plan.run_id,
+            plan_step=0,
+        )
+        state.fit_in_goal = replanned.reason == FIT_IN_GOAL
+        if replanned.run_id is None and not state.fit_in_goal:
+            return "lost"
+        return None
+
+    def _act(self, state: EpisodeState) -> None:
+        from twisted.sim import Curve
+
+        assert state.plan is not None
+        step = state.plan.steps[state.position]
+        seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
+        state.actions += 1
+        state.position += 1
+        state.points = seen.points
+        drift = _drift(seen.points, step)
+        observed = _observed(seen.points)
+        off_plan = seen.fault is not None or observed != step.p_data or drift > self.settings.drift_m
+        if off_plan and self.settings.closed_loop:
+            state.plan = None
+        self.progress(
+            f"action {state.actions}: {'cinch' if step.curve is None else 'curve'} -> "
+            f"{observed.key if observed else '?'} (plan {step.p_data.key}, drift {drift:.3f} m)"
+            + (" off plan" if off_plan else "")
+        )
+        self._record(
+            state,
+            "curve" if step.curve is not None else "cinch",
+            curve=step.curve,
+            **self._observation(seen.points),
+            expected_key=step.p_data.key,
+            drift_m=drift,
+            fault=seen.fault,
+            world_checkpoint=self.world.checkpoint(),
+            **({"plan_run_id": None, "plan_step": None} if state.plan is None else {}),
+        )
+
+
+def run_episode(
+    store: Any,
+    plan: Plan,
+    goal: Goal,
+    planner: ModelPlanner,
+    level: Any,
+    seed: int,
+    settings: EpisodeSettings,
+    progress: Callable[[str], None] | None = None,
+) -> EpisodeResult:
+    """A new episode: the world drawn at ``level`` from ``seed`` (:class:`twisted.world.SimWorld`), its row
+    stored, the rope laid out as ``plan``'s root, then :meth:`Episode.run`."""
+    from twisted.store.episodes import create_episode
+    from twisted.world import SimWorld
+
+    world = SimWorld(level, seed)
+    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
+    run_id = create_episode(
+        store,
+        parameters,
+        plan_run_id=plan.run_id,
+        goal_knot=goal.knot_label or goal.spec,
+        level=level.name,
+        level_ranges=level.to_dict(),
+        world_seed=seed,
+        physics=world.physics.to_dict(),
+        closed_loop=settings.closed_loop,
+        timeout_s=settings.timeout_s,
+        max_actions=settings.max_actions,
+    )
+    planner.episode_run_id = run_id
+    stop = planner.stop or (lambda: False)
+    episode = Episode(store, run_id, world, goal, planner, settings, stop, progress)
+    return episode.run(episode.begin(plan))
+
+
+def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
+    """Where a stopped episode stood after its last stored step, and the world's checkpoint to restore.
+
+    The observation is the last one stored; the plan the last step named (None: the next thing is a
+    replan). Raises PlanInputError when the steps hold no observation with a world checkpoint."""
+    seen = [s for s in steps if s.points is not None and s.world_checkpoint is not None]
+    if not seen:
+        raise PlanInputError("the episode stored no observation to resume from")
+    last_seen = seen[-1]
+    last = steps[-1]
+    plan = None
+    position = 0
+    if last.plan_run_id is not None:
+        plan = plan_of_run(store, int(last.plan_run_id))
+        position = int(last.plan_step or 0)
+        if not 0 <= position <= len(plan.steps):
+            raise PlanInputError(
+                f"the episode's last step names step {position} of a plan of {len(plan.steps)}"
+            )
+    state = EpisodeState(
+        points=last_seen.points,
+        plan=plan,
+        position=position,
+        actions=sum(1 for s in steps if s.kind in ("curve", "cinch")),
+        replans=sum(1 for s in steps if s.kind == "replan"),
+        planning_s=float(sum(s.planning_s or 0.0 for s in steps)),
+        elapsed_s=float(last.elapsed_s),
+        replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
+        pulls=sum(1 for s in steps if s.kind == "pull_test"),
+        fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
+    )
+    return state, dict(last_seen.world_checkpoint)

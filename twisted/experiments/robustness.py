@@ -1,0 +1,257 @@
+"""Robustness: knots tied in worlds drawn at each perturbation level, open against closed loop.
+
+``run_robustness`` plans each knot once in the model from the straight rope (with the pull test; a solved
+run of the same knot and options in the store is reused), then runs one episode per (level, world seed,
+loop) (:func:`twisted.experiments.episodes.run_episode`), skipping those the store already holds finished,
+so that running it again continues. ``robustness_table`` reads every finished episode back, grouped by
+knot, level and loop: episodes, tied, the success rate, and per success the actions, replans, planning
+seconds and wall seconds. ``plot_robustness`` draws the success rate against the level (docs/DESIGN.md
+section 15.7); ``twisted report`` writes both when the store holds episodes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+
+from twisted.goals import PlanInputError
+from twisted.runtime import StopSignals
+
+LEVEL_ORDER = ("none", "mild", "moderate", "strong")
+FINISHED = ("tied", "not_tied", "out_of_budget", "lost")
+
+
+@dataclass
+class RobustnessRow:
+    """One (knot, level, loop) group of finished episodes."""
+
+    knot: str
+    level: str
+    closed_loop: bool
+    episodes: int
+    tied: int
+    actions_per_success: float | None
+    replans_per_success: float | None
+    planning_s_per_success: float | None
+    wall_s_per_success: float | None
+
+    @property
+    def success(self) -> float:
+        return self.tied / self.episodes if self.episodes else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "knot": self.knot,
+            "level": self.level,
+            "loop": "closed" if self.closed_loop else "open",
+            "episodes": self.episodes,
+            "tied": self.tied,
+            "success": round(self.success, 3),
+            "actions_per_success": self.actions_per_success,
+            "replans_per_success": self.replans_per_success,
+            "planning_s_per_success": self.planning_s_per_success,
+            "wall_s_per_success": self.wall_s_per_success,
+        }
+
+
+def _mean(values: Sequence[float]) -> float | None:
+    return round(float(np.mean(values)), 3) if values else None
+
+
+def _level_key(level: str) -> tuple[int, str]:
+    return (LEVEL_ORDER.index(level) if level in LEVEL_ORDER else len(LEVEL_ORDER), level)
+
+
+def robustness_table(store: Any) -> list[RobustnessRow]:
+    """Every finished episode, grouped by (knot, level, loop), in knot, level (none .. strong), loop order."""
+    from twisted.store.episodes import EpisodeRow
+
+    with store.session() as session:
+        rows = session.execute(
+            select(
+                EpisodeRow.goal_knot,
+                EpisodeRow.level,
+                EpisodeRow.closed_loop,
+                EpisodeRow.outcome,
+                EpisodeRow.actions,
+                EpisodeRow.replans,
+                EpisodeRow.planning_s,
+                EpisodeRow.elapsed_s,
+            ).where(EpisodeRow.outcome.in_(FINISHED))
+        ).all()
+    groups: dict[tuple[str, str, bool], list[Any]] = {}
+    for r in rows:
+        groups.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(r)
+    table = []
+    for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
+        group = groups[(knot, level, closed)]
+        tied = [r for r in group if r.outcome == "tied"]
+        table.append(
+            RobustnessRow(
+                knot,
+                level,
+                closed,
+                len(group),
+                len(tied),
+                _mean([r.actions for r in tied]),
+                _mean([r.replans for r in tied]),
+                _mean([r.planning_s for r in tied]),
+                _mean([r.elapsed_s for r in tied]),
+            )
+        )
+    return table
+
+
+def plot_robustness(table: Sequence[RobustnessRow], path: Path) -> Path:
+    """Success rate against perturbation level, one line per knot and loop."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from twisted.render.draw import save_png
+
+    levels = sorted({r.level for r in table}, key=_level_key)
+    fig, ax = plt.subplots(figsize=(7.0, 4.2))
+    for knot in sorted({r.knot for r in table}):
+        for closed in (False, True):
+            rows = {r.level: r for r in table if r.knot == knot and r.closed_loop == closed}
+            if not rows:
+                continue
+            xs = [i for i, level in enumerate(levels) if level in rows]
+            ys = [rows[levels[i]].success for i in xs]
+            n = sum(r.episodes for r in rows.values())
+            label = f"{knot}, {'closed' if closed else 'open'} loop ({n} episodes)"
+            ax.plot(xs, ys, marker="o", linestyle="-" if closed else "--", label=label)
+    ax.set_xticks(range(len(levels)), levels)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("perturbation level (docs/DESIGN.md section 15.2)")
+    ax.set_ylabel("fraction tied (pull test in the world)")
+    ax.set_title("tying success against model mismatch")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return save_png(fig, path)
+
+
+def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
+    """The table as Markdown lines (a section of report.md)."""
+
+    def cell(x: float | None) -> str:
+        return "-" if x is None else f"{x:g}"
+
+    lines = [
+        "| knot | level | loop | episodes | tied | success | actions / success | replans / success "
+        "| planning s / success | wall s / success |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in table:
+        lines.append(
+            f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
+            f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
+            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} |"
+        )
+    return lines
+
+
+def model_plan(
+    store: Any, knot: str, seed: int, timeout_s: float, workers: int, stop: StopSignals
+) -> tuple[Any, Any, Any, float]:
+    """The knot's plan in the model from the straight rope (with the pull test): a solved run of the same
+    goal and options reused, else a new search. (plan, goal, options, planning seconds spent here)."""
+    from twisted.experiments.episodes import ModelPlanner, plan_of_run
+    from twisted.planner import planner_options
+    from twisted.planner.untie import make_any_goal
+    from twisted.store.models import Run
+    from twisted.store.search import SearchRunRow
+
+    goal = make_any_goal(None, knot, None)
+    options = planner_options({"tighten": True, "seed": seed})
+    wanted = options.to_dict()
+    with store.session() as session:
+        candidates = session.execute(
+            select(SearchRunRow.run_id, Run.parameters)
+            .join(Run, Run.id == SearchRunRow.run_id)
+            .where(
+                SearchRunRow.goal_knot == goal.knot,
+                SearchRunRow.outcome == "solved",
+                SearchRunRow.start_configuration_id.is_(None),
+            )
+            .order_by(SearchRunRow.run_id)
+        ).all()
+    for run_id, parameters in candidates:
+        same = isinstance(parameters, dict) and all(parameters.get(k) == v for k, v in wanted.items())
+        if same and not parameters.get("episode") and not parameters.get("both_ways"):
+            return plan_of_run(store, run_id), goal, options, 0.0
+    planner = ModelPlanner(store, goal, options, None, workers, None, stop)
+    started = time.perf_counter()
+    try:
+        run_id, solved = planner.search(None, seed, timeout_s)
+    finally:
+        planner.close()
+    if not solved:
+        raise PlanInputError(f"the model found no plan for {knot} in {timeout_s:g} s (run {run_id})")
+    return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
+
+
+def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool]]:
+    """(level, world seed, closed loop) of the finished episodes of a plan."""
+    from twisted.store.episodes import EpisodeRow
+
+    with store.session() as session:
+        rows = session.execute(
+            select(EpisodeRow.level, EpisodeRow.world_seed, EpisodeRow.closed_loop).where(
+                EpisodeRow.plan_run_id == plan_run_id, EpisodeRow.outcome.in_(FINISHED)
+            )
+        ).all()
+    return {(r.level, int(r.world_seed), bool(r.closed_loop)) for r in rows}
+
+
+def run_robustness(
+    store: Any,
+    knots: Sequence[str],
+    levels: Sequence[Any],
+    seeds: Sequence[int],
+    loops: Sequence[bool],
+    settings: Any,
+    workers: int,
+    stop: StopSignals,
+    progress: Callable[[str], None],
+) -> list[Any]:
+    """Every (knot, level, seed, loop) episode not yet finished in the store; the results of those run."""
+    from dataclasses import replace
+
+    from twisted.experiments.episodes import ModelPlanner, run_episode
+
+    results: list[Any] = []
+    for knot in knots:
+        plan, goal, options, planning_s = model_plan(store, knot, 0, settings.timeout_s, workers, stop)
+        progress(f"{knot}: plan run {plan.run_id} ({planning_s:.1f} s in the model)")
+        done = done_episodes(store, plan.run_id)
+        # one planner for the knot's episodes: the model and the simulator workers are loaded once
+        planner = ModelPlanner(store, goal, options, None, workers, None, stop)
+        try:
+            for level in levels:
+                for seed in seeds:
+                    for closed in loops:
+                        if stop():
+                            return results
+                        if (level.name, seed, closed) in done:
+                            continue
+                        episode = replace(settings, closed_loop=closed)
+                        result = run_episode(store, plan, goal, planner, level, seed, episode)
+                        loop = "closed" if closed else "open"
+                        progress(
+                            f"{knot} {level.name} seed {seed} {loop} loop: episode {result.run_id} "
+                            f"{result.outcome}, {result.actions} actions, {result.replans} replans, "
+                            f"{result.elapsed_s:.1f} s"
+                        )
+                        results.append(result)
+        finally:
+            planner.close()
+    return results

@@ -1,0 +1,180 @@
+"""From observed link points back to the planner: P-data and a configuration ``q`` of the planner's model.
+
+P-data is ``Top`` of the points (docs/DESIGN.md section 4.2). The configuration is a fit of the model's
+chain to the points (docs/DESIGN.md section 15.4): link ``i`` runs from point ``i`` to point ``i + 1``, so
+its direction is known; the middle link carries the free joint (its centre is the mid-point of its two
+points) and every other link hangs off its neighbour towards the middle by a yaw about the parent's z
+and then a pitch about the new y (the order of the hinges in the MJCF, 2.1). Each hinge pair is read
+from the child's direction in the parent's frame. The roll of the middle link about its own axis is not
+seen in the points; the fit takes the roll whose hinge angles bend the chain least (the least elastic
+energy), which for a rope lying on a table is the horizontal one. Points lower than the model's link
+radius (less 2 mm) are raised to it (they lie on the table). Joint angles are clipped to the
+model's limits, the velocity is zero (a rope at rest), and the fit's residual is the RMS distance between
+the observed points and the points of the fitted configuration.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import numpy.typing as npt
+
+from twisted.rope import N_LINKS, N_POINTS
+from twisted.sim.mjcf import MIDDLE_LINK, RopeParams, joint_names
+from twisted.sim.rope import RopeSim
+from twisted.topology import PData, top
+
+FloatArray = npt.NDArray[np.float64]
+
+ROLL_GRID = 36  # roll candidates of the middle link, 10 degrees apart
+HEIGHT_STRETCHES = (
+    1.0,
+    1.5,
+    2.0,
+    3.0,
+)  # tried in turn when a fit is pressed through a strand (rest_configuration)
+TABLE_GIVE_M = 0.002  # how far under one radius a resting rope's centreline may be seen before it is raised
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A configuration of the planner's model fitted to observed points."""
+
+    q: FloatArray  # qpos then qvel (zero), docs/DESIGN.md section 2.3
+    points: FloatArray  # the link points of ``q``
+    residual_m: float  # RMS distance of ``points`` from the observed points
+
+
+def observed_p_data(points: npt.ArrayLike) -> PData:
+    """``Top`` of observed link points (the one P-data reader, topology.top)."""
+    return top(np.asarray(points, dtype=np.float64))
+
+
+def _rz(a: float) -> FloatArray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _ry(a: float) -> FloatArray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _hinges(parent: FloatArray, direction: FloatArray, limit: float) -> tuple[float, float, FloatArray]:
+    """Yaw and pitch turning ``parent``'s x axis onto ``direction`` (clipped to +-limit); the child frame."""
+    u = parent.T @ direction
+    yaw = float(np.clip(math.atan2(u[1], u[0]), -limit, limit))
+    pitch = float(np.clip(math.atan2(-u[2], math.hypot(u[0], u[1])), -limit, limit))
+    return yaw, pitch, parent @ _rz(yaw) @ _ry(pitch)
+
+
+def _root_frame(direction: FloatArray, roll: float) -> FloatArray:
+    x = direction
+    y = np.cross([0.0, 0.0, 1.0], x)
+    if np.linalg.norm(y) < 1e-9:  # a vertical middle link: any horizontal y will do
+        y = np.array([0.0, 1.0, 0.0])
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    frame = np.column_stack([x, y, z])
+    c, s = math.cos(roll), math.sin(roll)
+    return frame @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+class ChainFit:
+    """Fits the planner's chain to link points; holds one model simulator for the forward kinematics."""
+
+    def __init__(self, params: RopeParams | None = None) -> None:
+        self.sim = RopeSim(params=params or RopeParams())
+        m = self.sim.model
+        # the qpos addresses of each joint's (yaw, pitch)
+        self._adr = [[int(m.jnt_qposadr[m.joint(n).id]) for n in joint_names(i)] for i in range(N_LINKS - 1)]
+        self._limit = math.radians(self.sim.params.joint_limit_deg)
+
+    def _qpos(self, points: FloatArray, roll: float) -> tuple[FloatArray, float]:
+        """qpos for one roll of the middle link, and its bending energy (sum of squared hinge angles)."""
+        d = np.diff(points, axis=0)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        qpos = np.zeros(self.sim.model.nq)
+        root = _root_frame(d[MIDDLE_LINK], roll)
+        qpos[:3] = 0.5 * (points[MIDDLE_LINK] + points[MIDDLE_LINK + 1])
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, root.reshape(-1))
+        qpos[3:7] = quat
+        energy = 0.0
+        # the head half hangs off the middle by joint i (links i, i+1), the tail half by joint i-1
+        halves = ((range(MIDDLE_LINK - 1, -1, -1), 0), (range(MIDDLE_LINK + 1, N_LINKS), -1))
+        for order, joint_shift in halves:
+            frame = root
+            for link in order:
+                yaw, pitch, frame = _hinges(frame, d[link], self._limit)
+                a_yaw, a_pitch = self._adr[link + joint_shift]
+                qpos[a_yaw], qpos[a_pitch] = yaw, pitch
+                energy += yaw * yaw + pitch * pitch
+        return qpos, energy
+
+    def fit(self, points: npt.ArrayLike) -> Fit:
+        """The configuration whose link points come closest to ``points`` (N_POINTS x 3, metres)."""
+        p = np.asarray(points, dtype=np.float64)
+        if p.shape != (N_POINTS, 3) or not np.all(np.isfinite(p)):
+            raise ValueError(f"observed points must be {N_POINTS} x 3 finite values, got shape {p.shape}")
+        if np.min(np.linalg.norm(np.diff(p, axis=0), axis=1)) < 1e-9:
+            raise ValueError("observed points: two neighbouring link points coincide")
+        observed = p
+        # a point lower than the model's resting height lies on the table: the model's rope rests with
+        # its centreline one radius up (less a contact's sub-millimetre give), and a chain fitted lower
+        # would be pressed into the table
+        p = p.copy()
+        p[:, 2] = np.maximum(p[:, 2], self.sim.params.link_radius_m - TABLE_GIVE_M)
+        rolls = np.linspace(-math.pi, math.pi, ROLL_GRID, endpoint=False)
+        candidates = [self._qpos(p, float(r)) for r in rolls]
+        best = int(np.argmin([energy for _, energy in candidates]))
+        # refine around the best grid roll (golden-section on the energy)
+        lo, hi = rolls[best] - math.pi / ROLL_GRID, rolls[best] + math.pi / ROLL_GRID
+        for _ in range(30):
+            a, b = hi - 0.618 * (hi - lo), lo + 0.618 * (hi - lo)
+            if self._qpos(p, a)[1] < self._qpos(p, b)[1]:
+                hi = b
+            else:
+                lo = a
+        qpos = self._qpos(p, 0.5 * (lo + hi))[0]
+        q = np.concatenate([qpos, np.zeros(self.sim.model.nv)])
+        self.sim.set_state(q)
+        fitted = self.sim.link_points()
+        residual = float(np.sqrt(np.mean(np.sum((fitted - observed) ** 2, axis=1))))
+        return Fit(q, fitted, residual)
+
+    def rest_configuration(
+        self, points: npt.ArrayLike
+    ) -> tuple[Fit, tuple[FloatArray, FloatArray, PData] | None]:
+        """The fit of ``points`` and its configuration at rest in the model (:meth:`at_rest`).
+
+        A chain fitted through noisy points can press one strand more than a radius into another where
+        they cross, which the model rejects; then the heights above the resting height are stretched
+        (x1.5, x2, x3: which strand is over stays over) and fitted again, and the model lets the rope
+        fall back when it rests. The fit returned is that of the points as observed."""
+        p = np.asarray(points, dtype=np.float64)
+        first = self.fit(p)
+        floor = self.sim.params.link_radius_m
+        for stretch in HEIGHT_STRETCHES:
+            fit = first
+            if stretch != 1.0:
+                stretched = p.copy()
+                stretched[:, 2] = floor + np.maximum(p[:, 2] - floor, 0.0) * stretch
+                fit = self.fit(stretched)
+            rest = self.at_rest(fit)
+            if rest is not None:
+                return first, rest
+        return first, None
+
+    def at_rest(self, fit: Fit) -> tuple[FloatArray, FloatArray, PData] | None:
+        """The fitted configuration let come to rest in the planner's model (the noise of the points may
+        press a link into the table or another strand): its ``q``, points and P-data, or None when the
+        model rejects it."""
+        self.sim.set_state(fit.q)
+        reason, _ = self.sim.settle()
+        if reason is not None:
+            return None
+        return self.sim.state(), self.sim.link_points(), self.sim.p_data()
