@@ -14,7 +14,11 @@ file byte-identical (sha256). The compression bombs (``models.weights``, ``rl_ch
 
 To keep the run short, a scalar column (integer, float, text, time, flag) is read by its cheapest
 reader only, with two values; JSON and blob columns by every reader, with every value of their kind.
-Count and time: see docs/security.md (``pytest -q tests/test_fuzz_store.py``).
+Count and time (``pytest -q tests/test_fuzz_store.py``, 2026-12-06, with the run boundary of trust-runs):
+285 columns in 26 tables, 130 of them read by these commands; 312 (table, column, value, command) cases
+in process, 211 browse page fetches (452 column cases) and 3 bombs in child processes: 477 passed and
+50 expected failures (:data:`KNOWN`) in 4 min 58 s of wall time on the shared 2-core development machine
+(1 min 36 s user + 38 s system CPU, the template store's set-up included).
 """
 
 from __future__ import annotations
