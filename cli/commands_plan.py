@@ -27,6 +27,7 @@ from cli.app import (
     err_console,
     fail,
     open_db,
+    shown_name,
     store_exists,
     unwritable,
 )
@@ -366,7 +367,7 @@ def print_result(result: Any, as_json: bool) -> None:
     expand = result.calls_by_source().get("random_expand", 0)
     console.print(
         f"run {result.run_id}: {outcome}"
-        f"  goal {result.goal.label}"
+        f"  goal {shown_name(result.goal.label)}"  # a knot name read back from the store
         + (f" reached {result.path[-1].p_data.key}" if result.path and result.goal.knot else "")
         + f"  search time {result.elapsed_s:.1f} s (set-up {result.setup_s:.1f} s)"
         f"  simulator calls {result.sim_calls}{f' ({expand} in random expansions)' if expand else ''}"
@@ -423,7 +424,8 @@ def replay_command(
             if result.reached_goal
             else "[bold red]does not reach the goal[/]"
         )
-        console.print(f"run {run_id}: the replayed plan {verdict} {result.goal.label}", highlight=False)
+        goal = shown_name(result.goal.label)  # a knot name read back from the store
+        console.print(f"run {run_id}: the replayed plan {verdict} {goal}", highlight=False)
         if tighten:
             t = result.tightened
             wanted = ", ".join(sorted(result.goal.knot_types)) or "no knot (the goal state is a knotoid)"

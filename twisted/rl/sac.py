@@ -25,7 +25,7 @@ from sqlalchemy import delete, select
 
 from twisted.store.db import Store
 from twisted.store.models import utcnow
-from twisted.store.payloads import UnsafePayloadError, load_tensors
+from twisted.store.payloads import UnsafePayloadError, load_tensors, stored_bytes
 from twisted.store.rl import RlCheckpoint, RlRun, RlSuccess, add_checkpoint, add_success
 
 __all__ = [
@@ -238,6 +238,7 @@ def read_policy(blob: bytes, what: str) -> dict[str, Any]:
 
     Raises :class:`UnsafePayloadError` (a ValueError) naming ``what`` for anything else.
     """
+    blob = stored_bytes(blob, what)
     if _is_sb3_zip(blob):
         return _read_sb3_zip(blob, what)
     state = load_tensors(blob, what)
@@ -358,7 +359,7 @@ def read_buffer(blob: bytes, what: str, limit: int) -> dict[str, Any]:
     """
     inflate = zlib.decompressobj()
     try:
-        raw = inflate.decompress(blob, limit)
+        raw = inflate.decompress(stored_bytes(blob, what), limit)
     except zlib.error as exc:
         raise UnsafePayloadError(f"{what} is not a compressed replay buffer ({exc})") from None
     if inflate.unconsumed_tail:

@@ -19,6 +19,7 @@ transaction waits for its turn instead of failing with "database is locked".
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import sqlite3
 import time
@@ -554,7 +555,22 @@ def _stored_rope(conn: Connection) -> Any:
     from twisted.rope import RopeProfile
 
     row = conn.execute(text("SELECT n_links, link_spacing_m FROM rope_profile ORDER BY id LIMIT 1")).first()
-    return None if row is None else RopeProfile(int(row[0]), float(row[1]))
+    if row is None:
+        return None
+    n_links, spacing = row
+    # read back, the row is input: an integer count and a finite positive length, or the store is refused
+    if not (
+        type(n_links) is int
+        and 0 < n_links <= 100_000
+        and type(spacing) in (int, float)
+        and math.isfinite(spacing)
+        and spacing > 0
+    ):
+        raise StoreError(
+            f"the database's rope_profile holds n_links {n_links!r:.40}, link_spacing_m {spacing!r:.40}: not "
+            "a rope (the row is damaged); nothing was changed"
+        )
+    return RopeProfile(n_links, float(spacing))
 
 
 def _peek_rope(conn: Connection) -> Any:

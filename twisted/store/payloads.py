@@ -21,12 +21,22 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["UnsafePayloadError", "check_tensor_archive", "load_tensors"]
+__all__ = ["UnsafePayloadError", "check_tensor_archive", "load_tensors", "stored_bytes"]
 
 
 class UnsafePayloadError(ValueError):
     """A stored payload that is not plain data (tensors, numbers, strings, lists, dicts), or larger than
     what it declares: not loaded."""
+
+
+def stored_bytes(data: object, what: str) -> bytes:
+    """``data`` if it is bytes; :class:`UnsafePayloadError` naming ``what`` otherwise (SQLite keeps text or
+    a number in a BLOB column as it was written, so a payload read back may be neither)."""
+    if isinstance(data, bytes):
+        return data
+    if isinstance(data, bytearray | memoryview):
+        return bytes(data)
+    raise UnsafePayloadError(f"{what} cannot be loaded: it holds {type(data).__name__}, not bytes")
 
 
 def check_tensor_archive(data: bytes, what: str, max_bytes: int | None = None) -> int:
@@ -40,6 +50,7 @@ def check_tensor_archive(data: bytes, what: str, max_bytes: int | None = None) -
     import io
     import zipfile
 
+    data = stored_bytes(data, what)
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as archive:
             members = archive.infolist()
