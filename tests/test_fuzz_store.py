@@ -142,8 +142,8 @@ def _schema() -> dict[str, str]:
     import twisted.store.knots  # noqa: F401
     import twisted.store.plans  # noqa: F401
     import twisted.store.rl  # noqa: F401
-    import twisted.store.rope  # noqa: F401
-    import twisted.store.search  # noqa: F401
+    import twisted.store.rope_profile  # noqa: F401
+    import twisted.store.search_tree  # noqa: F401
     import twisted.store.training  # noqa: F401
 
     kinds = {"JSON": "json", "BLOB": "blob", "LARGEBINARY": "blob", "FLOAT": "float", "BOOLEAN": "bool"}
