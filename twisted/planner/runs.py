@@ -458,12 +458,14 @@ def resume_search(
         take_lease,
     )
 
-    info = load_run(store, run_id, with_nodes=False)
+    # the whole run is read and checked (parameters, checkpoint, every node) before the lease: a run
+    # the boundary refuses stays exactly as it is stored
+    info = load_run(store, run_id)
     if info is None:
         raise PlanInputError(f"run {run_id} is not a planner run in this database")
     if info.checkpoint is None:
         raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
-    options = stored_options(info.parameters, run_id)  # before the lease: a refused run stays as it is
+    options = stored_options(info.parameters, run_id)
     try:
         take_lease(store, run_id)  # from here on this process is the run's one writer
     except (LookupError, RunBusyError) as exc:
@@ -558,6 +560,7 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
     ``tighten``: then pull the final rope tight (:mod:`twisted.tighten`) and store the pull test with
     the run (table ``tightenings``).
     """
+    from twisted.planner.both_ways import accepted_configuration
     from twisted.sim import Curve, RopeSim
     from twisted.sim.pool import simulate
     from twisted.store.search_tree import NoPlanError, solved_run
@@ -571,7 +574,9 @@ def replay(store: Any, run_id: int, friction_scale: float = 1.0, tighten: bool =
     # a path with a cinch needs the second gripper; the states are the same vectors either way
     cinched = any(node.action == "cinch" for node in path)
     sim = tightening_sim(friction_scale) if cinched else RopeSim(friction_scale)
-    state = path[0].q
+    start = path[0]
+    accepted_configuration(start.q, start.points, "search_nodes", start.id)  # the simulator takes it
+    state = start.q
     steps = []
     final_p_data = None
     for node in path[1:]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import math
 import time
 import zlib
 from collections.abc import Callable
@@ -23,10 +24,18 @@ from typing import Any
 
 from sqlalchemy import delete, select
 
+from twisted.store.boundary import StoredValueError, shown, stored_object
 from twisted.store.db import Store
 from twisted.store.models import utcnow
 from twisted.store.payloads import UnsafePayloadError, load_tensors, stored_bytes
-from twisted.store.rl import RlCheckpoint, RlRun, RlSuccess, add_checkpoint, add_success
+from twisted.store.rl import (
+    RlCheckpoint,
+    RlRun,
+    RlSuccess,
+    add_checkpoint,
+    add_success,
+    checkpoint_counters,
+)
 
 __all__ = [
     "RlProgress",
@@ -95,6 +104,25 @@ class SacConfig:
         return dataclasses.asdict(self)
 
     @classmethod
+    def from_stored(cls, parameters: Any, run_id: int) -> SacConfig:
+        """The settings of SAC run ``run_id`` as stored (``rl_runs.parameters``), checked like new ones:
+        a JSON object whose known settings have their declared types and pass :meth:`validate`.
+        StoredValueError naming the setting otherwise (the CLI's exit 2), before anything is written."""
+        table, field_name = "rl_runs", "parameters"
+        stored = stored_object(parameters, table, run_id, field_name)
+        for spec in dataclasses.fields(cls):
+            if spec.name in stored:
+                problem = _setting_problem(str(spec.type), stored[spec.name])
+                if problem is not None:
+                    raise StoredValueError(table, run_id, f"{field_name}.{spec.name}", problem)
+        config = cls.from_dict(stored)
+        try:
+            config.validate()
+        except ValueError as exc:
+            raise StoredValueError(table, run_id, field_name, str(exc)) from None
+        return config
+
+    @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SacConfig:
         known = {f.name for f in dataclasses.fields(cls)}
         kw = {k: v for k, v in d.items() if k in known}
@@ -102,6 +130,26 @@ class SacConfig:
             if kw.get(k) is not None:
                 kw[k] = tuple(kw[k])
         return cls(**kw)
+
+
+def _setting_problem(declared: str, value: Any) -> str | None:
+    """Why a stored setting is not of its declared type (``SacConfig``'s annotation), or None (the
+    JSON text's size is bounded where it is parsed, :func:`twisted.store.boundary.parse_json`)."""
+    optional = declared.endswith(" | None")
+    kind = declared.removesuffix(" | None")
+    if value is None:
+        return None if optional else f"must be {kind}, got null"
+    kinds: dict[str, Callable[[Any], bool]] = {
+        "int": lambda v: isinstance(v, int) and not isinstance(v, bool),
+        "float": lambda v: isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v),
+        "bool": lambda v: isinstance(v, bool),
+        "str": lambda v: isinstance(v, str),
+    }
+    if kind.startswith("tuple["):
+        item = kind.removeprefix("tuple[").removesuffix(", ...]")
+        fits = isinstance(value, list | tuple) and all(kinds[item](v) for v in value)
+        return None if fits else f"must be a list of {item}, got {shown(value)}"
+    return None if kinds[kind](value) else f"must be {kind}, got {shown(value)}"
 
 
 @dataclass
@@ -472,6 +520,7 @@ def train_sac(
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     resume_row: RlCheckpoint | None = None
+    resumed_at = (0, 0, 0.0)  # steps, episodes, elapsed_s of the checkpoint resumed from
     if resume_run_id is None:
         # settings and goals are checked before a run row exists, so bad input leaves no trace
         config = config or SacConfig()
@@ -485,13 +534,15 @@ def train_sac(
                 )
             if found.status == "finished":
                 raise ValueError(f"SAC run {resume_run_id} has finished: start a new run instead")
-            config = SacConfig.from_dict(found.parameters)
+            config = SacConfig.from_stored(found.parameters, found.id)
             resume_row = session.scalars(
                 select(RlCheckpoint)
                 .where(RlCheckpoint.rl_run_id == found.id)
                 .order_by(RlCheckpoint.id.desc())
                 .limit(1)
             ).first()
+            if resume_row is not None:  # where the run goes back to, checked before anything is written
+                resumed_at = checkpoint_counters(resume_row)
     env = make_env(config, _url(store))
     vec_env = DummyVecEnv([lambda: Monitor(env)])
     model = _new_model(config, vec_env)
@@ -515,15 +566,8 @@ def train_sac(
         if resume_run_id is not None:
             run = session.get(RlRun, resume_run_id)
             assert run is not None
-            if resume_row is not None:
-                # the counters go back to the checkpoint: steps after it are lost with the process
-                run.steps_done, run.episodes, run.elapsed_s = (
-                    resume_row.steps,
-                    resume_row.episodes,
-                    resume_row.elapsed_s,
-                )
-            else:
-                run.steps_done, run.episodes, run.elapsed_s = 0, 0, 0.0
+            # the counters go back to the checkpoint (or to 0): steps after it are lost with the process
+            run.steps_done, run.episodes, run.elapsed_s = resumed_at
             # ... and so do the success intervals a killed process logged after it (they are re-run)
             session.execute(
                 delete(RlSuccess).where(RlSuccess.rl_run_id == run.id, RlSuccess.steps > run.steps_done)

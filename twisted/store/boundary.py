@@ -44,9 +44,11 @@ __all__ = [
     "get_row",
     "parse_json",
     "shown",
+    "stored_count",
     "stored_curve",
     "stored_floats",
     "stored_object",
+    "stored_seconds",
 ]
 
 # the largest JSON cell read back: the planner's own cells reach 100 kB in short searches (a checkpoint's
@@ -163,13 +165,15 @@ def check_declared(
                 raise StoredValueError(table, row, f"{field}.{spec.name}", problem)
 
 
-def _count(value: Any, table: str, row: Any, field: str) -> int:
+def stored_count(value: Any, table: str, row: Any, field: str) -> int:
+    """A stored count (iterations, steps, a node's sequence number): an integer in [0, 2**31)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= int(value) <= MAX_COUNT:
         raise StoredValueError(table, row, field, f"must be a count in [0, {MAX_COUNT}], got {shown(value)}")
     return int(value)
 
 
-def _seconds(value: Any, table: str, row: Any, field: str) -> float:
+def stored_seconds(value: Any, table: str, row: Any, field: str) -> float:
+    """A stored duration: a finite number of seconds, not negative."""
     if not _finite(value) or value < 0:
         problem = f"must be a finite number of seconds >= 0, got {shown(value)}"
         raise StoredValueError(table, row, field, problem)
@@ -184,8 +188,8 @@ def check_checkpoint(
     statistics objects of ``[count, reward]`` pairs. Returns the values, the generator state parsed."""
     table = "search_checkpoints"
     named = ((iteration, "iteration"), (sim_calls, "sim_calls"), (nodes, "nodes"))
-    counts = [_count(value, table, row, name) for value, name in named]
-    seconds = _seconds(elapsed_s, table, row, "elapsed_s")
+    counts = [stored_count(value, table, row, name) for value, name in named]
+    seconds = stored_seconds(elapsed_s, table, row, "elapsed_s")
     try:
         state = parse_json(rng_state) if isinstance(rng_state, str | bytes) else rng_state
     except StoredJSONError as exc:

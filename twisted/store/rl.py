@@ -30,6 +30,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
+from twisted.store.boundary import stored_count, stored_seconds
 from twisted.store.models import Base, RunLifecycle, utcnow
 
 __all__ = [
@@ -39,6 +40,7 @@ __all__ = [
     "RlSuccess",
     "add_checkpoint",
     "add_success",
+    "checkpoint_counters",
     "list_checkpoints",
     "success_table",
 ]
@@ -132,6 +134,17 @@ def add_checkpoint(
     session.add(row)
     session.flush()
     return row.id
+
+
+def checkpoint_counters(row: RlCheckpoint) -> tuple[int, int, float]:
+    """A checkpoint's ``(steps, episodes, elapsed_s)`` as stored, checked at the boundary (counts in
+    [0, 2**31), seconds finite and not negative): StoredValueError naming the field otherwise."""
+    table = "rl_checkpoints"
+    return (
+        stored_count(row.steps, table, row.id, "steps"),
+        stored_count(row.episodes, table, row.id, "episodes"),
+        stored_seconds(row.elapsed_s, table, row.id, "elapsed_s"),
+    )
 
 
 def add_success(session: Session, run_id: int, steps: int, counts: dict[int, tuple[int, int]]) -> None:

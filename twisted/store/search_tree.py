@@ -52,16 +52,19 @@ from sqlalchemy import (
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal, PlanInputError, state_goal
-from twisted.rope import N_LINKS
+from twisted.rope import N_LINKS, N_POINTS
 from twisted.runtime import process_alive
 from twisted.store.boundary import (
     StoredValueError,
     check_checkpoint,
+    check_configuration,
     get_row,
     shown,
+    stored_count,
     stored_curve,
     stored_floats,
     stored_object,
+    stored_seconds,
 )
 from twisted.store.models import Base, Run, TopologicalState, array_to_blob, utcnow
 from twisted.store.queries import get_or_create_state
@@ -476,23 +479,33 @@ def _nodes(session: Session, run_id: int, where: Any | None = None) -> list[Stor
         query = query.where(where)
     seq_of: dict[int, int] = {}
     out = []
+    table = "search_nodes"
     for row, key in session.execute(query):
-        seq_of[row.id] = row.seq
+        seq = stored_count(row.seq, table, row.id, "seq")
+        seq_of[row.id] = seq
         curve = None
         if row.link is not None:  # the curve columns are NULL together (root) or set together
-            curve = stored_curve(row.link, row.z_max_m, row.x_m, row.y_m, N_LINKS, "search_nodes", row.id)
+            curve = stored_curve(row.link, row.z_max_m, row.x_m, row.y_m, N_LINKS, table, row.id)
+        # a rope configuration: finite, the profile's points (whether the simulator takes q is the
+        # planner's check, twisted.planner.both_ways.accepted_configuration)
+        q = stored_floats(row.q, table, row.id, "q")
+        points = stored_floats(row.points, table, row.id, "points", width=3)
+        check_configuration(q, points, N_POINTS, table, row.id)
+        if row.action not in ("curve", "cinch"):
+            problem = f"must be 'curve' or 'cinch', got {shown(row.action)}"
+            raise StoredValueError(table, row.id, "action", problem)
         out.append(
             StoredNode(
                 id=row.id,
-                seq=row.seq,
+                seq=seq,
                 parent_seq=None if row.parent_id is None else seq_of.get(row.parent_id),
                 p_data=_state(key, row.state_id),
-                q=stored_floats(row.q, "search_nodes", row.id, "q"),
-                points=stored_floats(row.points, "search_nodes", row.id, "points", width=3),
+                q=q,
+                points=points,
                 curve=curve,
-                iteration=row.iteration,
-                sim_call=row.sim_call,
-                created_s=row.created_s,
+                iteration=stored_count(row.iteration, table, row.id, "iteration"),
+                sim_call=stored_count(row.sim_call, table, row.id, "sim_call"),
+                created_s=stored_seconds(row.created_s, table, row.id, "created_s"),
                 action=row.action,
             )
         )
