@@ -42,6 +42,7 @@ def check_rope(points: Any, where: str) -> None:
 def draw(store: Any, out: Path, kind: str, arg: str) -> None:
     """Draw one picture (``state`` KEY or ``plan`` RUN_ID) into ``out``; RenderError when it cannot be."""
     from twisted.render import RenderError, find_drawing, render_goal, render_run, render_tightened
+    from twisted.store.boundary import StoredValueError
     from twisted.store.search_tree import NoPlanError, solved_run
     from twisted.topology import PDataError, parse_p_data
 
@@ -60,6 +61,9 @@ def draw(store: Any, out: Path, kind: str, arg: str) -> None:
             _, path = solved_run(store, run_id)
         except NoPlanError as exc:
             raise RenderError(f"{exc}: nothing to draw") from None
+        except StoredValueError as exc:  # the boundary's node checks (q, points, counts) refused a node
+            rope = "; not a rope of this store" if exc.field in ("q", "points") else ""
+            raise RenderError(f"run {run_id}: {exc}{rope}; not drawn") from None
         for node in path:
             check_rope(node.points, f"search node {node.id} of run {run_id}")
         if out.suffix == ".gif":
