@@ -13,12 +13,16 @@ file byte-identical (sha256). The compression bombs (``models.weights``, ``rl_ch
 ``.replay_buffer``) run in a child process under a 3 GiB address-space limit and must exit 2 within it.
 
 To keep the run short, a scalar column (integer, float, text, time, flag) is read by its cheapest
-reader only, with two values; JSON and blob columns by every reader, with every value of their kind.
-Count and time (``pytest -q tests/test_fuzz_store.py``, 2026-12-06, with the run boundary of trust-runs):
-285 columns in 26 tables, 130 of them read by these commands; 312 (table, column, value, command) cases
-in process, 211 browse page fetches (452 column cases) and 3 bombs in child processes: 477 passed and
-50 expected failures (:data:`KNOWN`) in 4 min 58 s of wall time on the shared 2-core development machine
-(1 min 36 s user + 38 s system CPU, the template store's set-up included).
+reader only, with two values; JSON and blob columns by every reader, with every value of their kind,
+except that the slow readers (:data:`SLOW`) get of the JSON values the parser refuses only "deep"; the
+browse pages are fetched for the kinds the plugin's cells read (:data:`PLUGIN_KINDS`, and floats of a
+column of seconds). Count and time (``pytest -q tests/test_fuzz_store.py``, 2026-12-06): 285 columns in
+26 tables, 130 of them read by these commands; 286 (table, column, value, command) cases in process and
+5 named refusals, 157 browse page fetches (297 column cases) and 3 bombs in child processes: 438 passed
+and 14 expected failures (:data:`KNOWN`) in 2 min 24 s of wall time on the shared 2-core development
+machine (1 min 29 s user + 40 s system CPU, the template store's set-up included; before the cut of
+SLOW and the browse kinds, 518 passed and 14 expected failures in 4 min 50 s wall, 2 min 30 s CPU, with
+the machine busier).
 """
 
 from __future__ import annotations
@@ -201,6 +205,13 @@ def _values(column: str) -> list[str]:
     return values
 
 
+# The slowest readers (a search set up) get the JSON values that reach the reader's own checks, and of
+# those the parser refuses only "deep": "not-json" and "empty" end on the same path (the engine's
+# json_deserializer, twisted.store.cells), which the cheaper readers of each column still take.
+SLOW = {"plan --resume", "untie", "rl train --resume"}
+PARSE_REFUSED = ("not-json", "empty")
+
+
 def _cases() -> list[tuple[str, str, str, str]]:
     cases = []
     for column, commands in sorted(READERS.items()):
@@ -212,7 +223,8 @@ def _cases() -> list[tuple[str, str, str, str]]:
             commands = [c for c in commands if c != "render --run"]
         for value in values:
             for command in commands:
-                cases.append((column, kind, value, command))
+                if not (kind == "json" and command in SLOW and value in PARSE_REFUSED):
+                    cases.append((column, kind, value, command))
     return cases
 
 
@@ -381,13 +393,23 @@ def test_a_refused_cell_is_named(
 # ---- browse: every table's page, every column hostile -------------------------------------------------
 
 
+# Datasette shows integers, times and flags as they come; the plugin's cells (twisted/browse/plugin.py)
+# read JSON, blobs and text, and floats of a column of seconds: the pages of those kinds are fetched.
+PLUGIN_KINDS = ("json", "blob", "text")
+
+
+def _has_seconds(table: str) -> bool:
+    columns = [c for c, kind in SCHEMA.items() if c.split(".")[0] == table and kind == "float"]
+    return any(c.endswith(("_s", "_seconds")) for c in columns)
+
+
 def _browse_cases() -> list[tuple[str, str, str]]:
     """One page fetch per (table, hostile value of each kind): the value planted into every column of
     that kind at once (Datasette and the plugin's cells read every column of the page)."""
     cases = []
     for table in sorted({c.split(".")[0] for c in SCHEMA}):
         kinds = sorted({kind for c, kind in SCHEMA.items() if c.split(".")[0] == table})
-        for kind in kinds:
+        for kind in [k for k in kinds if k in PLUGIN_KINDS or (k == "float" and _has_seconds(table))]:
             # Datasette shows numbers, times and flags as they are: one value of those kinds
             values = list(HOSTILE[kind])[: None if kind in ("json", "blob") else 1]
             values += ["huge"] if kind == "text" else []
