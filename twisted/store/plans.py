@@ -105,8 +105,8 @@ class PlanRow(Base):
         bad = [moves] if not isinstance(moves, list) else [m for m in moves if not _is_move(m)][:1]
         if bad:
             raise StoredValueError("plans", self.id, "moves", f"must be a list of moves, got {shown(bad[0])}")
-        if not isinstance(states, list) or len(states) != len(moves) + 1:
-            problem = f"must be {len(moves) + 1} P-data (one more than the moves), got {shown(states)}"
+        if not isinstance(states, list) or not states:
+            problem = f"must be a list of P-data, the plan's start first, got {shown(states)}"
             raise StoredValueError("plans", self.id, "states", problem)
         try:
             parsed = [parse_p_data(s) for s in states]
