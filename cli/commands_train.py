@@ -367,6 +367,7 @@ def _export_model(store: Any, model_id: int | None, target: Path) -> None:
 
 def _print_models(store: Any, models: list[Any]) -> None:
     """The stored models as a table (with the improve generation each one is)."""
+    from twisted.store.boundary import StoredValueError, shown, stored_object
     from twisted.store.improve import lineage_labels
 
     with store.session() as session:
@@ -384,16 +385,20 @@ def _print_models(store: Any, models: list[Any]) -> None:
         "created",
     )
     for m in models:
+        metrics = stored_object(m.metrics, "models", m.id, "metrics")
+        if isinstance(m.size_bytes, bool) or not isinstance(m.size_bytes, int | float):
+            problem = f"must be a number, got {shown(m.size_bytes)}"
+            raise StoredValueError("models", m.id, "size_bytes", problem)
         table.add_row(
             str(m.id),
             shown_name(m.name),
             ("-" if m.training_run_id is None else str(m.training_run_id))
-            + ("" if m.metrics.get("init_model_id") is None else f" (from {m.metrics['init_model_id']})"),
+            + ("" if metrics.get("init_model_id") is None else f" (from {metrics['init_model_id']})"),
             generations.get(m.id, "-"),
             str(m.data_size),
-            _by_source(m.metrics, "train"),
-            _fmt(m.metrics.get("val_loss")),
-            _fmt(m.metrics.get("val_link_accuracy"), ".3f"),
+            _by_source(metrics, "train"),
+            _fmt(metrics.get("val_loss")),
+            _fmt(metrics.get("val_link_accuracy"), ".3f"),
             f"{m.size_bytes / 1e6:.1f} MB",
             m.created_at.strftime("%Y-%m-%d %H:%M"),
         )

@@ -123,12 +123,17 @@ def high_level(store: Any, goal: Goal, limit: int, both_ways: bool = False) -> C
     """
     from twisted.store.plans import cached_plans
 
-    target: Goal | PData = goal.states[0] if len(goal.states) == 1 else goal
+    target = _plan_target(goal)
 
     def plans_from(start: PData) -> list[Any]:
         return list(cached_plans(store, start, target, limit, both_ways=both_ways))
 
     return plans_from
+
+
+def _plan_target(goal: Goal) -> Goal | PData:
+    """What the plan cache is asked for: the one state of a one-state goal, else the goal."""
+    return goal.states[0] if len(goal.states) == 1 else goal
 
 
 def straight_rope() -> tuple[np.ndarray, np.ndarray, PData]:
@@ -450,6 +455,7 @@ def resume_search(
     progress: Callable[[Search], None] | None = None,
 ) -> Search:
     """Continue a stopped run from its checkpoint: same run id, tree reloaded, elapsed time carried over."""
+    from twisted.store.plans import check_cached_plans
     from twisted.store.search_tree import (
         RunBusyError,
         SearchRun,
@@ -465,7 +471,8 @@ def resume_search(
         raise PlanInputError(f"run {run_id} is not a planner run in this database")
     if info.checkpoint is None:
         raise PlanInputError(f"run {run_id} has no checkpoint to resume from")
-    options = stored_options(info.parameters, run_id)
+    options = stored_options(info.parameters, run_id)  # before the lease: a refused run stays as it is
+    check_cached_plans(store, run_id, _plan_target(info.goal), bool(info.parameters.get("both_ways")))
     try:
         take_lease(store, run_id)  # from here on this process is the run's one writer
     except (LookupError, RunBusyError) as exc:

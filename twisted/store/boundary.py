@@ -30,6 +30,7 @@ from sqlalchemy import JSON, Text, select
 from sqlalchemy import cast as sql_cast
 from sqlalchemy.orm import Session
 
+from twisted.store.cells import StoredValueError
 from twisted.store.models import blob_to_array
 
 __all__ = [
@@ -59,17 +60,6 @@ MAX_JSON_BYTES = 64 * 2**20
 # crossings, each a list); Python's parser recurses once per level
 MAX_JSON_DEPTH = 32
 MAX_COUNT = 2**31 - 1  # iterations, simulator calls, nodes: what an INTEGER column of PostgreSQL holds
-
-
-class StoredValueError(ValueError):
-    """A value read back from the store that the code refuses: "table, row N, field: what is wrong".
-
-    The CLI exits 2 with the message (cli/app.py); it is raised before anything is written."""
-
-    def __init__(self, table: str, row: Any, field: str, problem: str) -> None:
-        self.table, self.row, self.field, self.problem = table, row, field, problem
-        refused = "damaged in the store: refused, nothing changed"
-        super().__init__(f"{table}, row {row}, {field}: {problem} ({refused})")
 
 
 class StoredJSONError(ValueError):
@@ -119,6 +109,10 @@ def get_row(session: Session, model: Any, key: Any) -> Any:
     :class:`StoredValueError` naming it."""
     try:
         return session.get(model, key)
+    except StoredValueError as exc:  # a cell refused as the row loaded (twisted.store.cells): its row is key
+        if exc.row is None and exc.table == model.__table__.name:
+            raise StoredValueError(exc.table, key, exc.field, exc.problem) from None
+        raise
     except StoredJSONError as exc:
         table = model.__table__
         failed = "a JSON column"

@@ -34,6 +34,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, declared_attr, mapped_column
 
+from twisted.store.cells import check_cells_of
+
 # Deterministic constraint names: Alembic batch mode (SQLite) and PostgreSQL both need named constraints
 # to alter or drop them later.
 NAMING_CONVENTION = {
@@ -69,6 +71,9 @@ class Base(DeclarativeBase):
 
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
     type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+check_cells_of(Base.metadata)  # a stored time or JSON cell that does not read names its column
 
 
 RowT = TypeVar("RowT", bound=Base)

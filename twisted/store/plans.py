@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import datetime as dt
 import time
-from typing import Any
+from typing import Any, get_args
 
 from sqlalchemy import (
     JSON,
@@ -37,12 +37,29 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Mapped, Session, mapped_column
 
 from twisted.goals import Goal
-from twisted.moves import MOVES_VERSION, REMOVALS_VERSION, Move, Plan, plans_both_ways, plans_to_any
+from twisted.moves import (
+    MOVES_VERSION,
+    REMOVALS_VERSION,
+    Move,
+    MoveKind,
+    Plan,
+    plans_both_ways,
+    plans_to_any,
+)
+from twisted.store.boundary import StoredValueError, shown
 from twisted.store.db import Store
 from twisted.store.models import Base, utcnow
-from twisted.topology import PData, parse_p_data
+from twisted.topology import PData, PDataError, parse_p_data
 
-__all__ = ["BOTH_WAYS_SUFFIX", "PlanQuery", "PlanRow", "cached_plans", "get_plans", "put_plans"]
+__all__ = [
+    "BOTH_WAYS_SUFFIX",
+    "PlanQuery",
+    "PlanRow",
+    "cached_plans",
+    "check_cached_plans",
+    "get_plans",
+    "put_plans",
+]
 
 
 class PlanQuery(Base):
@@ -83,7 +100,61 @@ class PlanRow(Base):
     __table_args__ = (UniqueConstraint("start_key", "goal_key", "plan_index", name="uq_plans_key"),)
 
     def to_plan(self) -> Plan:
-        return Plan([parse_p_data(s) for s in self.states], [Move.from_dict(m) for m in self.moves])
+        """The plan, its states and moves checked (a :class:`StoredValueError` names the field)."""
+        states, moves = self.states, self.moves
+        bad = [moves] if not isinstance(moves, list) else [m for m in moves if not _is_move(m)][:1]
+        if bad:
+            raise StoredValueError("plans", self.id, "moves", f"must be a list of moves, got {shown(bad[0])}")
+        if not isinstance(states, list) or not states:
+            problem = f"must be a list of P-data, the plan's start first, got {shown(states)}"
+            raise StoredValueError("plans", self.id, "states", problem)
+        try:
+            parsed = [parse_p_data(s) for s in states]
+        except (PDataError, TypeError, ValueError) as exc:
+            raise StoredValueError("plans", self.id, "states", str(exc)[:200]) from None
+        return Plan(parsed, [Move.from_dict(m) for m in moves])
+
+
+_MOVE_FIELDS: dict[str, tuple[Any, ...]] = {
+    "kind": get_args(MoveKind),
+    "side": ("L", "R"),
+    "other_side": ("L", "R"),
+    "sign": ("+", "-"),
+    "over": ("O", "U"),
+    "remove": (True, False),
+}
+
+
+def _is_move(value: Any) -> bool:
+    """``value`` is a dict of :meth:`Move.to_dict`: a kind, segments that are counts, known words."""
+    if not isinstance(value, dict) or "kind" not in value or "segment" not in value:
+        return False
+    for name, item in value.items():
+        if name in ("segment", "other_segment"):
+            if isinstance(item, bool) or not isinstance(item, int) or not 0 <= item < 2**31:
+                return False
+        elif name not in _MOVE_FIELDS or not any(item is w or item == w for w in _MOVE_FIELDS[name]):
+            return False
+    return True
+
+
+def check_cached_plans(store: Store, run_id: int, goal: PData | Goal, both_ways: bool) -> None:
+    """Read every cached plan toward ``goal`` from a state of run ``run_id``'s tree, as a search of the
+    run will (:meth:`PlanRow.to_plan`): a damaged one is refused before the run is resumed, not in the
+    middle of its search (the plans cached for states the search has not met yet are read when it meets
+    them)."""
+    tables = Base.metadata.tables
+    nodes, states = tables["search_nodes"], tables["topological_states"]
+    starts = (
+        select(states.c.key).join(nodes, nodes.c.state_id == states.c.id).where(nodes.c.run_id == run_id)
+    )
+    with store.session() as session:
+        queries = select(PlanQuery).where(
+            PlanQuery.goal_key == _goal_key(goal, both_ways), PlanQuery.start_key.in_(starts)
+        )
+        for query in session.scalars(queries):
+            for row in session.scalars(select(PlanRow).where(PlanRow.query_id == query.id)):
+                row.to_plan()
 
 
 BOTH_WAYS_SUFFIX = f"|both-ways@{REMOVALS_VERSION}"
