@@ -158,9 +158,12 @@ def worker_process() -> None:
     Ctrl-C reaches the whole process group, but it is the command's process that stops the workers (a
     worker killed by it would lose its job, and a pool waits for that result for ever): ignore it. And
     leave as soon as the command's process is gone (SIGKILL): the results have nowhere to go, and
-    writing them into the closed pipe only prints BrokenPipeError tracebacks.
+    writing them into the closed pipe only prints BrokenPipeError tracebacks. The thread below notices
+    the parent's end within milliseconds, but a result written in those milliseconds met the closed pipe
+    first (seen once in CI's load): SIGPIPE's default action ends the worker quietly at that write too.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)
     threading.Thread(target=_exit_with_parent, name="twisted-exit-with-parent", daemon=True).start()
 
 
