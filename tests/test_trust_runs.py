@@ -29,7 +29,7 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from twisted.planner.options import PlannerOptions, specs
-from twisted.store.boundary import MAX_JSON_BYTES, MAX_JSON_DEPTH, StoredJSONError, parse_json
+from twisted.store.boundary import MAX_JSON_BYTES, MAX_JSON_DEPTH, StoredJSONError, parse_json, shown
 
 ONE = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
 REPO = Path(__file__).resolve().parents[1]
@@ -291,3 +291,11 @@ def test_a_ctrl_c_after_the_run_is_solved_and_stored_leaves_exit_0(
     assert outcome == "solved"
     if picture and not png.exists():
         assert "was solved and stored: that stands (exit 0)" in " ".join(err.split())
+
+
+def test_a_huge_stored_value_is_quoted_cut_whatever_its_type() -> None:
+    """Before: a dict of over 600 items raised TypeError (sliced like a list) inside an error message."""
+    for value in ("x" * 10_000, b"x" * 10_000, list(range(10_000)), {i: i for i in range(10_000)}):
+        text = shown(value)
+        assert len(text) <= 60 and "..." in text
+    assert shown({"k": 1}) == "{'k': 1}"

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from twisted.rope import N_LINKS  # the rope's link count, without loading MuJoCo
+from twisted.store.boundary import shown as quoted  # one quoting of a given or stored value
 
 __all__ = [
     "HEURISTICS",
@@ -71,26 +72,20 @@ class OptionSpec:
         if self.choices:
             listed = ", ".join(self.choices)
             allowed = isinstance(value, str) and value in self.choices
-            return None if allowed else f"must be one of {listed}, got {_shown(value)}"
+            return None if allowed else f"must be one of {listed}, got {quoted(value)}"
         if self.type is bool:
-            return None if isinstance(value, bool) else f"must be true or false, got {_shown(value)}"
+            return None if isinstance(value, bool) else f"must be true or false, got {quoted(value)}"
         wanted = numbers.Integral if self.type is int else numbers.Real
         if isinstance(value, bool) or not isinstance(value, wanted):
-            return f"must be {'an integer' if self.type is int else 'a number'}, got {_shown(value)}"
+            return f"must be {'an integer' if self.type is int else 'a number'}, got {quoted(value)}"
         low, high = self.bounds
         number = int(value) if isinstance(value, numbers.Integral) else float(value)  # an int of any size
         nan = isinstance(number, float) and math.isnan(number)
         if nan or not ((low < number if self.low_open else low <= number) and number <= high):
             shown = "2**63-1" if high == MAX_SEED else f"{high:g}"
             must = self.must or f"lie in {'(' if self.low_open else '['}{low:g}, {shown}]"
-            return f"must {must}, got {_shown(value)}"
+            return f"must {must}, got {quoted(value)}"
         return None
-
-
-def _shown(value: Any, limit: int = 60) -> str:
-    """A value quoted in a message, cut to about ``limit`` characters (a stored one can be huge)."""
-    text = repr(value[: 10 * limit] if isinstance(value, str | list) else value)
-    return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-2:]}"
 
 
 def option(default: Any, help: str, **spec: Any) -> Any:

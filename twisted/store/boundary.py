@@ -23,6 +23,7 @@ import math
 import numbers
 import re
 from collections.abc import Iterable, Mapping
+from itertools import islice
 from typing import Any, Protocol, cast
 
 import numpy as np
@@ -69,7 +70,8 @@ class StoredJSONError(ValueError):
 def shown(value: Any, limit: int = 60) -> str:
     """``repr(value)`` cut to about ``limit`` characters, for quoting a stored value in a message."""
     if isinstance(value, str | bytes | list | dict) and len(value) > 10 * limit:
-        value = value[: 10 * limit]  # repr of a huge value is never built whole
+        # repr of a huge value is never built whole (a dict is cut by its first items: it has no slices)
+        value = dict(islice(value.items(), 10 * limit)) if isinstance(value, dict) else value[: 10 * limit]
     text = repr(value)
     return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-2:]}"
 
