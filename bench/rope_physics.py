@@ -29,12 +29,8 @@ import argparse
 from typing import Any
 
 import numpy as np
-from lib.steps import add_run_selection, planner_curves, pool_map, step_groups
+from lib.steps import add_run_selection, planner_curves, pool_map, step_curves, step_groups
 
-from twisted.model.registry import load_model
-from twisted.model.sampler import ModelCurves
-from twisted.planner.options import PlannerOptions
-from twisted.planner.parts import StepCurves
 from twisted.sim import RopeSim
 from twisted.sim.mjcf import LINK_HALF_LENGTH_M, link_name
 from twisted.store import open_store
@@ -115,10 +111,7 @@ def main() -> None:
     with open_store(args.db) as store:
         groups = step_groups(store, args.sets, args.labels, levels)
 
-    import torch
-
-    torch.set_num_threads(1)  # the simulator workers own the cores
-    planner = StepCurves(ModelCurves(load_model(None, None)), share=PlannerOptions().cross_move)
+    planner = step_curves(args.db, None)
     jobs: list[tuple[int, int, Any, Any, str]] = []  # (crossings, pair, q, curve, next state's key)
     drawn = {}
     for level in levels:

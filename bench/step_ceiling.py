@@ -28,16 +28,12 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from lib.steps import choose, move_class, pairs_from
+from lib.steps import choose, move_class, pairs_from, step_curves
 
-from twisted.model.registry import load_model
-from twisted.model.sampler import ModelCurves
 from twisted.moves import explains
 from twisted.planner.options import PlannerOptions
-from twisted.planner.parts import StepCurves
 from twisted.planner.tree import Node
 from twisted.sim.pool import SimPool
-from twisted.store import open_store
 from twisted.topology import parse_p_data
 
 WITHIN = (1, 2, 5)
@@ -124,17 +120,8 @@ def main() -> None:
             print(f"wrote {args.save_pairs}")
             return
 
-    import torch
-
-    torch.set_num_threads(1)  # the simulator workers own the cores (as curve_sampler does for a search)
-    options = PlannerOptions()
-    if args.model_id is not None:
-        with open_store(args.db) as store:
-            model = load_model(store, args.model_id)
-    else:
-        model = load_model(None, None)
-    sampler, model_id = ModelCurves(model), args.model_id
-    curves_of = StepCurves(sampler, share=options.cross_move)
+    options, model_id = PlannerOptions(), args.model_id
+    curves_of = step_curves(args.db, model_id)
     first: list[int | None] = [None] * len(chosen)
     counts = [[0, 0, 0, 0] for _ in chosen]  # scripted curves, their hits, model curves, their hits
     with SimPool(args.workers) as pool:

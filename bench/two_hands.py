@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lib.steps import choose, move_class, pairs_from, pool_map, segment_link
+from lib.steps import choose, move_class, pairs_from, pool_map, segment_link, step_curves
 
 from twisted.proposals import cross_move_curve, segment_bounds
 from twisted.rope import N_LINKS
@@ -281,23 +281,8 @@ def main() -> None:
         ap.error("--pairs and --k must be at least 1")
     levels = args.levels or [3, 4]
 
-    import torch
-
-    from twisted.model.registry import load_model
-    from twisted.model.sampler import ModelCurves
-    from twisted.planner.options import PlannerOptions
-    from twisted.planner.parts import StepCurves
-    from twisted.store import open_store
-
-    torch.set_num_threads(1)
     rng = np.random.default_rng(args.seed)
-    options = PlannerOptions()
-    if args.model_id is not None:
-        with open_store(args.db) as store:
-            model = load_model(store, args.model_id)
-    else:
-        model = load_model(None, None)
-    curves_of = StepCurves(ModelCurves(model), share=options.cross_move)
+    curves_of = step_curves(args.db, args.model_id)
 
     chosen: list[dict[str, Any]] = []
     for level in levels:

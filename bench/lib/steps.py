@@ -150,6 +150,23 @@ def pool_map(fn: Callable[[J], R], jobs: Sequence[J], workers: int) -> list[R]:
         return pool.map(fn, jobs, chunksize=8)
 
 
+def step_curves(db: str, model_id: int | None) -> StepCurves:
+    """The planner's curve proposer for plan steps, with the stored model ``model_id`` (the shipped one
+    when None), on one torch thread: the simulator workers own the cores (as a search's sampler does)."""
+    import torch
+
+    from twisted.model.registry import load_model
+    from twisted.model.sampler import ModelCurves
+
+    torch.set_num_threads(1)
+    if model_id is None:
+        model = load_model(None, None)
+    else:
+        with open_store(db) as store:
+            model = load_model(store, model_id)
+    return StepCurves(ModelCurves(model), share=PlannerOptions().cross_move)
+
+
 def planner_curves(
     planner: StepCurves, node: Node, nxt: Any, move: Any, k: int, rng: np.random.Generator
 ) -> list[Any]:
