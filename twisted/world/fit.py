@@ -11,6 +11,12 @@ energy), which for a rope lying on a table is the horizontal one. Points lower t
 radius (less 2 mm) are raised to it (they lie on the table). Joint angles are clipped to the
 model's limits, the velocity is zero (a rope at rest), and the fit's residual is the RMS distance between
 the observed points and the points of the fitted configuration.
+
+That first fit places each link from its own two points and the links before it, so the camera's noise
+adds up along the chain (about 1 cm RMS at the ``moderate`` level's 2 mm), enough to press one strand
+through another where they cross. It is then refined by damped least squares (Levenberg-Marquardt) over
+the middle link's pose and every hinge angle, towards the observed points: about 2-3 mm RMS at
+``moderate``, 20 ms (docs/DESIGN.md section 15.4).
 """
 
 from __future__ import annotations
@@ -36,6 +42,8 @@ HEIGHT_STRETCHES = (
     2.0,
     3.0,
 )  # tried in turn when a fit is pressed through a strand (rest_configuration)
+REFINE_ITERATIONS = 20  # Levenberg-Marquardt steps of the refinement (each: one finite-difference Jacobian)
+REFINE_DONE_M2 = 1e-16  # a sum of squared misses under this is an exact fit: nothing to refine
 TABLE_GIVE_M = 0.002  # how far under one radius a resting rope's centreline may be seen before it is raised
 
 
@@ -92,6 +100,7 @@ class ChainFit:
         # the qpos addresses of each joint's (yaw, pitch)
         self._adr = [[int(m.jnt_qposadr[m.joint(n).id]) for n in joint_names(i)] for i in range(N_LINKS - 1)]
         self._limit = math.radians(self.sim.params.joint_limit_deg)
+        self._hinge_adr = np.array(sorted(a for pair in self._adr for a in pair))
 
     def _qpos(self, points: FloatArray, roll: float) -> tuple[FloatArray, float]:
         """qpos for one roll of the middle link, and its bending energy (sum of squared hinge angles)."""
@@ -114,6 +123,54 @@ class ChainFit:
                 qpos[a_yaw], qpos[a_pitch] = yaw, pitch
                 energy += yaw * yaw + pitch * pitch
         return qpos, energy
+
+    def _points_of(self, qpos: FloatArray) -> FloatArray:
+        """The link points of ``qpos`` (forward kinematics only)."""
+        self.sim.data.qpos[:] = qpos
+        mujoco.mj_kinematics(self.sim.model, self.sim.data)
+        return self.sim.link_points()
+
+    def _moved(self, qpos: FloatArray, x: FloatArray) -> FloatArray:
+        """``qpos`` moved by ``x``: the middle link's centre by x[0:3], its orientation by the rotation
+        vector x[3:6] (in its own frame), the hinge angles by x[6:] (clipped to the joint limits)."""
+        q = qpos.copy()
+        q[:3] += x[:3]
+        angle = float(np.linalg.norm(x[3:6]))
+        if angle > 0.0:
+            turn, turned = np.empty(4), np.empty(4)
+            mujoco.mju_axisAngle2Quat(turn, x[3:6] / angle, angle)
+            mujoco.mju_mulQuat(turned, q[3:7], turn)
+            q[3:7] = turned / np.linalg.norm(turned)
+        q[self._hinge_adr] = np.clip(q[self._hinge_adr] + x[6:], -self._limit, self._limit)
+        return q
+
+    def _refine(self, qpos: FloatArray, target: FloatArray) -> FloatArray:
+        """Levenberg-Marquardt on the squared distances of ``qpos``'s link points from ``target``: a step
+        is kept only when it lowers them, so an exact fit stays exact."""
+        n = 6 + self._hinge_adr.size
+        miss = (self._points_of(qpos) - target).ravel()
+        cost, damping, h = float(miss @ miss), 1e-3, 1e-6
+        for _ in range(REFINE_ITERATIONS):
+            if cost < REFINE_DONE_M2:
+                break
+            jac = np.empty((miss.size, n))
+            for k in range(n):
+                x = np.zeros(n)
+                x[k] = h
+                jac[:, k] = ((self._points_of(self._moved(qpos, x)) - target).ravel() - miss) / h
+            normal, gradient = jac.T @ jac, jac.T @ miss
+            while damping < 1e6:
+                step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-9), gradient)
+                trial = self._moved(qpos, np.asarray(step, dtype=np.float64))
+                trial_miss = (self._points_of(trial) - target).ravel()
+                if float(trial_miss @ trial_miss) < cost:
+                    qpos, miss, cost = trial, trial_miss, float(trial_miss @ trial_miss)
+                    damping = max(damping / 3.0, 1e-7)
+                    break
+                damping *= 10.0
+            else:
+                break
+        return qpos
 
     def fit(self, points: npt.ArrayLike) -> Fit:
         """The configuration whose link points come closest to ``points`` (N_POINTS x 3, metres)."""
@@ -139,7 +196,7 @@ class ChainFit:
                 hi = b
             else:
                 lo = a
-        qpos = self._qpos(p, 0.5 * (lo + hi))[0]
+        qpos = self._refine(self._qpos(p, 0.5 * (lo + hi))[0], p)
         q = np.concatenate([qpos, np.zeros(self.sim.model.nv)])
         self.sim.set_state(q)
         fitted = self.sim.link_points()
