@@ -186,6 +186,10 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
                 info = load_run(store, step.replan_run_id, with_nodes=False)
                 assert info is not None and info.start_configuration_id is not None
                 assert info.parameters["episode"] == episode_id
+        # the robustness table gives the median planning time of a replan over the group's episodes
+        row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
+        planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
+        assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
 
 
 def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:

@@ -40,6 +40,7 @@ class RobustnessRow:
     replans_per_success: float | None
     planning_s_per_success: float | None
     wall_s_per_success: float | None
+    median_replan_s: float | None = None  # planning time of one replan, median over every episode's replans
 
     @property
     def success(self) -> float:
@@ -57,11 +58,16 @@ class RobustnessRow:
             "replans_per_success": self.replans_per_success,
             "planning_s_per_success": self.planning_s_per_success,
             "wall_s_per_success": self.wall_s_per_success,
+            "median_replan_s": self.median_replan_s,
         }
 
 
 def _mean(values: Sequence[float]) -> float | None:
     return round(float(np.mean(values)), 3) if values else None
+
+
+def _median(values: Sequence[float]) -> float | None:
+    return round(float(np.median(values)), 3) if values else None
 
 
 def _level_key(level: str) -> tuple[int, str]:
@@ -70,7 +76,7 @@ def _level_key(level: str) -> tuple[int, str]:
 
 def robustness_table(store: Any) -> list[RobustnessRow]:
     """Every finished episode, grouped by (knot, level, loop), in knot, level (none .. strong), loop order."""
-    from twisted.store.episodes import EpisodeRow
+    from twisted.store.episodes import EpisodeRow, EpisodeStep
 
     with store.session() as session:
         rows = session.execute(
@@ -85,9 +91,21 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeRow.elapsed_s,
             ).where(EpisodeRow.outcome.in_(FINISHED))
         ).all()
+        replans = session.execute(
+            select(EpisodeRow.goal_knot, EpisodeRow.level, EpisodeRow.closed_loop, EpisodeStep.planning_s)
+            .join(EpisodeStep, EpisodeStep.episode_id == EpisodeRow.run_id)
+            .where(
+                EpisodeRow.outcome.in_(FINISHED),
+                EpisodeStep.kind == "replan",
+                EpisodeStep.planning_s.is_not(None),
+            )
+        ).all()
     groups: dict[tuple[str, str, bool], list[Any]] = {}
     for r in rows:
         groups.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(r)
+    replan_s: dict[tuple[str, str, bool], list[float]] = {}
+    for r in replans:
+        replan_s.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(float(r.planning_s))
     table = []
     for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
         group = groups[(knot, level, closed)]
@@ -103,6 +121,7 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 _mean([r.replans for r in tied]),
                 _mean([r.planning_s for r in tied]),
                 _mean([r.elapsed_s for r in tied]),
+                _median(replan_s.get((knot, level, closed), [])),
             )
         )
     return table
@@ -147,14 +166,14 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
 
     lines = [
         "| knot | level | loop | episodes | tied | success | actions / success | replans / success "
-        "| planning s / success | wall s / success |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| planning s / success | wall s / success | median s / replan |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table:
         lines.append(
             f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
             f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
-            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} |"
+            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} |"
         )
     return lines
 
