@@ -312,14 +312,6 @@ def tie_command(
         ..., "--knot", help="The knot to tie (overhand, figure-eight, 5_2, granny, ...)."
     ),
     planner_seed: int = typer.Option(0, "--planner-seed", min=0, max=2**63 - 1, help="Seed of the searches."),
-    robust: int = typer.Option(
-        0,
-        "--robust",
-        min=0,
-        max=64,
-        help="Robust steps: keep a plan step's curve only when it reaches the next state also in this many "
-        "ropes drawn from the moderate level (0: off; docs/DESIGN.md section 15.5).",
-    ),
     as_json: bool = json_option("the episode's outcome"),
     *,
     world: WorldRequest,
@@ -343,7 +335,7 @@ def tie_command(
     with stop.installed():
         try:
             plan, goal, options, planning_s = model_plan(
-                store, knot, planner_seed, world.timeout_s, world.workers, stop, robust
+                store, knot, planner_seed, world.timeout_s, world.workers, stop
             )
         except PlanInputError as exc:
             err_console.print(str(exc), highlight=False)
@@ -376,14 +368,6 @@ def robustness_command(
         3, "--draws", min=1, max=10_000, help="World draws (seeds --seed ...) per level."
     ),
     loops: str = typer.Option("open,closed", "--loops", help="open, closed or both (open,closed)."),
-    robust: int = typer.Option(
-        0,
-        "--robust",
-        min=0,
-        max=64,
-        help="Robust steps: keep a plan step's curve only when it reaches the next state also in this many "
-        "ropes drawn from the moderate level (0: off; docs/DESIGN.md section 15.5).",
-    ),
     as_json: bool = json_option("the table"),
     *,
     world: WorldRequest,
@@ -425,7 +409,6 @@ def robustness_command(
                 world.workers,
                 stop,
                 _progress(as_json),
-                robust,
             )
         except PlanInputError as exc:
             err_console.print(str(exc), highlight=False)

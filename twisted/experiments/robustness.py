@@ -179,11 +179,10 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
 
 
 def model_plan(
-    store: Any, knot: str, seed: int, timeout_s: float, workers: int, stop: StopSignals, robust: int = 0
+    store: Any, knot: str, seed: int, timeout_s: float, workers: int, stop: StopSignals
 ) -> tuple[Any, Any, Any, float]:
-    """The knot's plan in the model from the straight rope (with the pull test; ``robust``: the robust
-    steps' ropes, DESIGN 15.5): a solved run of the same goal and options reused, else a new search.
-    (plan, goal, options, planning seconds spent here)."""
+    """The knot's plan in the model from the straight rope (with the pull test): a solved run of the same
+    goal and options reused, else a new search. (plan, goal, options, planning seconds spent here)."""
     from twisted.experiments.episodes import ModelPlanner, plan_of_run
     from twisted.planner import planner_options
     from twisted.planner.both_ways import make_any_goal
@@ -191,7 +190,7 @@ def model_plan(
     from twisted.store.search_tree import SearchRunRow
 
     goal = make_any_goal(None, knot, None)
-    options = planner_options({"tighten": True, "seed": seed, "robust": robust})
+    options = planner_options({"tighten": True, "seed": seed})
     wanted = options.to_dict()
     with store.session() as session:
         candidates = session.execute(
@@ -242,19 +241,15 @@ def run_robustness(
     workers: int,
     stop: StopSignals,
     progress: Callable[[str], None],
-    robust: int = 0,
 ) -> list[Any]:
-    """Every (knot, level, seed, loop) episode not yet finished in the store; the results of those run
-    (``robust``: the robust steps' ropes of every search, the model's plan and the replans)."""
+    """Every (knot, level, seed, loop) episode not yet finished in the store; the results of those run."""
     from dataclasses import replace
 
     from twisted.experiments.episodes import ModelPlanner, run_episode
 
     results: list[Any] = []
     for knot in knots:
-        plan, goal, options, planning_s = model_plan(
-            store, knot, 0, settings.timeout_s, workers, stop, robust
-        )
+        plan, goal, options, planning_s = model_plan(store, knot, 0, settings.timeout_s, workers, stop)
         progress(f"{knot}: plan run {plan.run_id} ({planning_s:.1f} s in the model)")
         done = done_episodes(store, plan.run_id)
         # one planner for the knot's episodes: the model and the simulator workers are loaded once

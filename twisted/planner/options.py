@@ -173,26 +173,6 @@ class PlannerOptions:
         before_in_evals=True,
     )
 
-    robust: int = option(
-        0,
-        "Robust steps: a curve of a plan step counts as reaching the next state only when it does so also "
-        "in this many ropes drawn from --robust-level, each with the gripper's noise; the others are not "
-        "kept (0: off; docs/DESIGN.md section 15.5).",
-        bounds=(0, 64),
-        must="be a number of ropes in [0, 64]",
-        commands=EVALUATED,
-        before=0,
-        before_in_evals=True,
-    )
-    robust_level: str = option(
-        "moderate",
-        "The perturbation level the ropes of --robust are drawn from: mild | moderate | strong.",
-        choices=("mild", "moderate", "strong"),
-        commands=EVALUATED,
-        before="moderate",
-        before_in_evals=True,
-    )
-
     def validate(self) -> None:
         """Raise ValueError naming the option that is out of range."""
         for spec in specs():

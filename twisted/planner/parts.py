@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -47,9 +47,6 @@ from twisted.goals import Goal
 from twisted.planner.options import PlannerOptions
 from twisted.planner.tree import Node, SearchTree, is_cinched, pair_key
 from twisted.topology import PData
-
-if TYPE_CHECKING:  # the ensemble loads MuJoCo: imported where a search asks for it
-    from twisted.planner.ensemble import Ensemble
 
 __all__ = [
     "R1_ROOM_FLOOR",
@@ -694,7 +691,6 @@ class SearchParts:
     iteration: Iteration
     room: R1Room | None = None  # the cache the selections share, forgotten on rollback
     cinch: SummandCinch | None = None  # toward a composite knot with options.cinch
-    ensemble: Ensemble | None = None  # robust steps (options.robust > 0; twisted.planner.ensemble)
 
     def forget(self, committed: int) -> None:
         """An unfinished iteration was rolled back to ``committed`` nodes: drop what it cached."""
@@ -750,14 +746,4 @@ def default_parts(
         iteration=LowLevelOnly() if options.planner == "low-level-only" else PlanGuided(),
         room=room,
         cinch=cinch,
-        ensemble=_ensemble(options),
     )
-
-
-def _ensemble(options: PlannerOptions) -> Ensemble | None:
-    """The robust steps' ropes (``options.robust`` of them), None when off."""
-    if not options.robust:
-        return None
-    from twisted.planner.ensemble import Ensemble
-
-    return Ensemble(options.robust, options.robust_level, options.seed)

@@ -82,7 +82,7 @@ __all__ = [
 # steps achieved] per state a follow_plan step started from (for analysis); [curves, curves
 # that reached the plan's next state] per proposer of a Cross step's curves ("cross_move", "sampler")
 STATS_TABLES = ("state", "plan", "move", "calls", "pair", "step", "cross")
-CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only", "cinch", "ensemble")
+CALL_SOURCES = ("follow_plan", "random_expand", "low_level_only", "cinch")
 
 
 # --- what the search composes -------------------------------------------------------------------------
@@ -236,7 +236,6 @@ class Search:
         self.iteration = 0
         self.elapsed_before_s = 0.0
         self.sim_calls = 0
-        self._ensemble_calls = 0  # the robust steps' calls of the simulate() in progress
         self.stats: dict[str, dict[str, list[float]]] = {table: {} for table in STATS_TABLES}
         if checkpoint is not None:
             self.rng.bit_generator.state = checkpoint.rng_state
@@ -431,7 +430,7 @@ class Search:
             if self.goal_node is not None:
                 return len(plan.moves)
             curves, scripted = self.step_curves(current, next_state, move)
-            children = self.simulate(current, curves, "follow_plan", self._robust(next_state))
+            children = self.simulate(current, curves, "follow_plan")
             reached = [c is not None and c.p_data == next_state for c in children]
             hit = next((c for c, ok in zip(children, reached, strict=True) if ok), None)
             script = self.parts.step_curves.script
@@ -468,42 +467,10 @@ class Search:
 
     # -- simulation and growing T -----------------------------------------------------------------------
 
-    def _robust(self, next_state: PData) -> Callable[[Node, Any, Any, int], bool] | None:
-        """With robust steps (``parts.ensemble``): which results of a plan step's curves are kept. A result
-        in ``next_state`` is kept when its curve reaches it in every rope of the ensemble too, and only the
-        first such one (the others stay out of ``T``: a node of the state is a robust one); every other
-        result is kept as without. None when robust steps are off."""
-        ensemble = self.parts.ensemble
-        if ensemble is None:
-            return None
-        chosen = False
-
-        def admit(parent: Node, curve: Any, result: Any, call: int) -> bool:
-            nonlocal chosen
-            if not result.ok or result.p_data != next_state:
-                return True
-            if chosen:
-                return False
-            passed, calls = ensemble.tries(parent.q, curve, next_state, call)
-            self._ensemble_calls += calls
-            self._count("calls", "ensemble", calls, int(passed))
-            chosen = passed
-            return passed
-
-        return admit
-
-    def simulate(
-        self,
-        parent: Node,
-        curves: list[Any],
-        source: str,
-        admit: Callable[[Node, Any, Any, int], bool] | None = None,
-    ) -> list[Node | None]:
+    def simulate(self, parent: Node, curves: list[Any], source: str) -> list[Node | None]:
         """Apply ``curves`` to ``parent`` in the worker pool; add the kept results to ``T`` in curve order.
 
-        ``source`` (one of CALL_SOURCES) is what the calls and kept results are counted under; ``admit``
-        (parent, curve, result, call number) may keep a result out of ``T`` (:meth:`_robust`); the
-        ensemble's calls it makes count after the curves' own.
+        ``source`` (one of CALL_SOURCES) is what the calls and kept results are counted under.
         """
         try:
             with self.stop.interruptible():
@@ -513,14 +480,7 @@ class Search:
         first_call = self.sim_calls + 1
         self.sim_calls += len(curves)
         pairs = enumerate(zip(curves, results, strict=True))
-        self._ensemble_calls = 0
-        children = [
-            self.add_to_tree(parent, curve, result, first_call + i)
-            if admit is None or admit(parent, curve, result, first_call + i)
-            else None
-            for i, (curve, result) in pairs
-        ]
-        self.sim_calls += self._ensemble_calls
+        children = [self.add_to_tree(parent, curve, result, first_call + i) for i, (curve, result) in pairs]
         self._count("calls", source, len(curves), sum(child is not None for child in children))
         return children
 
