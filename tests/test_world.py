@@ -117,7 +117,7 @@ def test_sim_world_is_a_world() -> None:
 def test_fitting_the_exact_points_of_a_configuration_returns_it() -> None:
     sim, fit, rng = RopeSim(), ChainFit(), np.random.default_rng(2)
     fitted = 0
-    while fitted < 8:
+    while fitted < 4:
         before = sim.state()
         if not sim.apply(sample_curve(rng)).ok:
             sim.set_state(before)
