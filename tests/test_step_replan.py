@@ -151,3 +151,17 @@ def test_a_search_for_one_action_keeps_only_curves_from_the_start_that_change_it
     assert len(nodes) > 1  # forty iterations of random curves toward two curls reach some crossing
     assert all(n.parent_id == root.id and n.cross > 0 for n in nodes if n.seq > 0)
     assert json.loads(parameters)["one_action"] is True
+
+
+def test_a_step_replan_with_no_time_left_is_out_of_time_not_lost(store) -> None:  # type: ignore[no-untyped-def]
+    from twisted.experiments.episodes import OUT_OF_TIME
+    from twisted.sim import RopeSim
+
+    sim = RopeSim()
+    sim.reset()
+    planner = ModelPlanner(store, knot_goal("overhand"), planner_options({}), None)
+    try:
+        replanned = planner.replan_step(sim.link_points(), seed=1, timeout_s=0.0)
+    finally:
+        planner.close()
+    assert replanned.reason == OUT_OF_TIME and replanned.plan is None and replanned.run_id is None

@@ -47,6 +47,9 @@ FIT_IN_GOAL = "the fit is in the goal"
 # ties a summand of the composite goal, or it is an untied tangle from which no adding move leads on.
 CINCH_FIRST = "cinch first"
 UNTANGLE = "untangle"
+# What a step replan says when the episode's time ran out before it could search (not ``lost``: the episode
+# ends out of budget).
+OUT_OF_TIME = "no time left to plan"
 UNKNOT = "0_1"
 # A step replan (``replan_step``) searches for one curve to each of at most STEP_TRIES next states,
 # ONE_ACTION_TIMEOUT_S each, then for any path of curves to the first, STEP_TIMEOUT_S: a next state one
@@ -267,7 +270,7 @@ class ModelPlanner:
         for target, limit_s, one_action in tries:
             remaining = timeout_s - (time.perf_counter() - started)
             if remaining <= 0:
-                break
+                return Replan(run_id, None, time.perf_counter() - started, residual, OUT_OF_TIME)
             budget = min(limit_s, max(remaining, 1.0))
             try:
                 run_id, solved = self.search(
@@ -506,7 +509,7 @@ class Episode:
         state.fit_in_goal = replanned.reason == FIT_IN_GOAL
         if replanned.reason in (CINCH_FIRST, UNTANGLE):
             self._cinch(state)
-        elif replanned.run_id is None and not state.fit_in_goal:
+        elif replanned.run_id is None and not state.fit_in_goal and replanned.reason != OUT_OF_TIME:
             return "lost"
         return None
 
