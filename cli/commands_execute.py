@@ -85,15 +85,6 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
             help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
         ),
     ),
-    "replan": (
-        str,
-        typer.Option(
-            "step",
-            "--replan",
-            help="Closed loop: plan each time to the next state of the high-level plans (step) or the "
-            "whole way to the goal (search) (docs/DESIGN.md section 15.4).",
-        ),
-    ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
 }
 
@@ -108,22 +99,15 @@ class WorldRequest:
     timeout_s: float
     max_actions: int
     drift_m: float
-    replan: str
     workers: int
 
     def check(self) -> tuple[Any, Any]:
         """The level and the episode's settings; exit 2 before anything is opened when one makes no sense."""
         from twisted.experiments.episodes import EpisodeSettings
-        from twisted.store.episodes import REPLAN_MODES
 
         level = _level(self.world)
         _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
-        if self.replan not in REPLAN_MODES:
-            fail(f"--replan {self.replan}: give {' or '.join(REPLAN_MODES)}")
-        settings = EpisodeSettings(
-            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.replan
-        )
-        return level, settings
+        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
 
 
 def with_world_options(func: F) -> F:
@@ -298,9 +282,7 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
     workers = parameters.get("workers")
     if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(
-        stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, stored.replan or "search"
-    )
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():

@@ -128,10 +128,6 @@ class SeenByPlanner(ModelPlanner):
         self.given.append((points, seed, timeout_s))
         return super().replan(points, seed, timeout_s)
 
-    def replan_step(self, points: Any, seed: int, timeout_s: float) -> Any:
-        self.given.append((points, seed, timeout_s))
-        return super().replan_step(points, seed, timeout_s)
-
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
     store = open_store(db)
@@ -140,9 +136,7 @@ def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
     return store, info.goal, stored_options(info.parameters), plan_of_run(store, run_id)
 
 
-def _episode_row(
-    store: Any, level: str, seed: int, plan: Any, closed_loop: bool, replan: str | None = None
-) -> int:
+def _episode_row(store: Any, level: str, seed: int, plan: Any, closed_loop: bool) -> int:
     from twisted.store.episodes import create_episode
 
     world_level = LEVELS[level]
@@ -156,23 +150,20 @@ def _episode_row(
         world_seed=seed,
         physics=SimWorld(world_level, seed).physics.to_dict(),
         closed_loop=closed_loop,
-        replan=replan or ("search" if closed_loop else None),
         timeout_s=120.0,
         max_actions=4,
     )
 
 
-# closed loop at moderate is this test's alone in the module (the Ctrl-C test runs one at strong)
-@pytest.mark.parametrize(("replan", "level"), [("search", "strong"), ("step", "moderate")])
-def test_the_planner_gets_observations_only(planned: tuple[str, int], replan: str, level: str) -> None:
+def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
     db, run_id = planned
     store, goal, options, plan = _parts(db, run_id)
-    episode_id = _episode_row(store, level, 3, plan, True, replan)
-    world = Spy(SimWorld(LEVELS[level], 3))
+    episode_id = _episode_row(store, "strong", 3, plan, True)
+    world = Spy(SimWorld(LEVELS["strong"], 3))
     planner = SeenByPlanner(store, goal, options, None, 1, episode_id)
     planner.given = []
     # a drift of 1 mm: every action is off plan, so the episode replans after each one
-    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=2, drift_m=0.001, replan=replan)
+    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=2, drift_m=0.001)
     try:
         episode = Episode(store, episode_id, world, goal, planner, settings)
         result = episode.run(episode.begin(plan))
@@ -196,7 +187,7 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int], replan: st
                 assert info is not None and info.start_configuration_id is not None
                 assert info.parameters["episode"] == episode_id
         # the robustness table gives the median planning time of a replan over the group's episodes
-        row = next(r for r in robustness_table(store) if r.replan == replan and r.level == level)
+        row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
         planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
         assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
 

@@ -43,20 +43,6 @@ MAX_PULLS = 3
 # What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
 # camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
 FIT_IN_GOAL = "the fit is in the goal"
-# What a step replan says when the rope is to be pulled tight and let go first (``_cinch_reason``): it
-# ties a summand of the composite goal, or it is an untied tangle from which no adding move leads on.
-CINCH_FIRST = "cinch first"
-UNTANGLE = "untangle"
-# What a step replan says when the episode's time ran out before it could search (not ``lost``: the episode
-# ends out of budget).
-OUT_OF_TIME = "no time left to plan"
-UNKNOT = "0_1"
-# A step replan (``replan_step``) searches for one curve to each of at most STEP_TRIES next states,
-# ONE_ACTION_TIMEOUT_S each, then for any path of curves to the first, STEP_TIMEOUT_S: a next state one
-# move away is reached in the model in a few curves or not soon (docs/DESIGN.md section 15.4).
-STEP_TRIES = 3
-ONE_ACTION_TIMEOUT_S = 5.0
-STEP_TIMEOUT_S = 20.0
 
 
 @dataclass(frozen=True)
@@ -128,27 +114,17 @@ class ModelPlanner:
         self.workers, self.episode_run_id, self.stop = workers, episode_run_id, stop
         self._resources = SearchResources()
         self._fit: Any = None
-        self._summands: Any = None
-        self._cinched: set[tuple[int | None, str]] = set()  # (episode, state) cinched by replan_step
 
     def close(self) -> None:
         self._resources.close()
 
-    def search(
-        self,
-        start_configuration_id: int | None,
-        seed: int,
-        timeout_s: float,
-        goal_spec: str | None = None,
-        **overrides: Any,
-    ) -> tuple[int, bool]:
-        """One search of the goal (or of ``goal_spec``) from a stored configuration (None: the straight
-        rope), with the plan's options but ``seed`` and ``overrides``; (run id, solved)."""
+    def search(self, start_configuration_id: int | None, seed: int, timeout_s: float) -> tuple[int, bool]:
+        """One search of the goal from a stored configuration (None: the straight rope); (run id, solved)."""
         from twisted.planner import SearchRequest, run_search
 
         request = SearchRequest(
-            goal=goal_spec or self.goal.spec,
-            options={**self.options.to_dict(), "seed": seed, **overrides},
+            goal=self.goal.spec,
+            options={**self.options.to_dict(), "seed": seed},
             start_config=start_configuration_id,
             model_id=self.model_id,
             workers=self.workers,
@@ -160,10 +136,9 @@ class ModelPlanner:
         assert result.run_id is not None  # a started search has its run
         return int(result.run_id), bool(result.solved)
 
-    def _configuration(self, points: FloatArray) -> tuple[int, PData, float] | Replan:
-        """The observed ``points`` fitted, at rest in the model and stored: (configuration id, its state,
-        the fit's residual); a :class:`Replan` saying why when there is nothing to plan from (its reason
-        :data:`FIT_IN_GOAL` when the fit at rest is in the goal)."""
+    def replan(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
+        """Fit the model's chain to observed ``points``, let it rest in the model, store it as a
+        configuration and search from there."""
         from twisted.store.queries import add_configuration
         from twisted.world import ChainFit
 
@@ -187,102 +162,13 @@ class ModelPlanner:
                 session, run_id=self.episode_run_id, p_data=p_data, q=q, points=fitted_points
             )
             configuration_id = int(configuration.id)
-        return configuration_id, p_data, float(fit.residual_m)
-
-    def replan(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
-        """Fit the model's chain to observed ``points``, let it rest in the model, store it as a
-        configuration and search from there to the goal."""
-        started = time.perf_counter()
-        made = self._configuration(points)
-        if isinstance(made, Replan):
-            return made
-        configuration_id, _, residual = made
         remaining = max(timeout_s - (time.perf_counter() - started), 1.0)
         try:
             run_id, solved = self.search(configuration_id, seed, remaining)
         except PlanInputError as exc:
-            return Replan(None, None, time.perf_counter() - started, residual, str(exc))
+            return Replan(None, None, time.perf_counter() - started, fit.residual_m, str(exc))
         plan = plan_of_run(self.store, run_id) if solved else None
-        return Replan(run_id, plan, time.perf_counter() - started, residual)
-
-    def plans(self, p_data: PData, both_ways: bool = False) -> list[Any]:
-        """The high-level plans from ``p_data`` to the goal, shortest first, through the plan cache."""
-        from twisted.planner.runs import high_level
-
-        return high_level(self.store, self.goal, int(self.options.plan_limit), both_ways)(p_data)
-
-    def next_states(self, p_data: PData) -> list[PData]:
-        """The states one move from ``p_data`` on its shortest high-level plans to the goal (adding moves;
-        both ways when adding moves cannot reach it), the state most plans go through first."""
-        from collections import Counter
-
-        plans = self.plans(p_data) or self.plans(p_data, both_ways=True)
-        states = {plan.states[1].key: plan.states[1] for plan in plans if len(plan.states) > 1}
-        counts = Counter(plan.states[1].key for plan in plans if len(plan.states) > 1)
-        return [states[key] for key, _ in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))]
-
-    def _cinch_reason(self, p_data: PData) -> str | None:
-        """Why the rope, in ``p_data``, is to be pulled tight and let go before the next step, once per
-        state and episode; None when it is not. :data:`CINCH_FIRST`: the goal is a composite knot, the
-        plan's options cinch and the state ties a summand (8). :data:`UNTANGLE`: no adding move leads from
-        the state to the goal and the rope ties nothing (both closures the unknot), so pulling it by both
-        ends takes its crossings out: a dead end undone in one action, where removing moves one by one
-        took the step searches' whole budget."""
-        from twisted.knots import identify
-
-        key = (self.episode_run_id, p_data.key)
-        if key in self._cinched:
-            return None
-        reason = None
-        if getattr(self.options, "cinch", False):
-            if self._summands is None:
-                from twisted.planner.parts import SummandCinch
-
-                self._summands = SummandCinch(self.goal)
-            if self._summands.summands and self._summands.ties_summand(p_data):
-                reason = CINCH_FIRST
-        if reason is None and p_data.cross > 0 and not self.plans(p_data) and identify(p_data).name == UNKNOT:
-            reason = UNTANGLE
-        if reason is not None:
-            self._cinched.add(key)
-        return reason
-
-    def replan_step(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
-        """Plan one step: fit and store the observed rope as :meth:`replan` does, then search in the model
-        for curves to the next state of the high-level plans (:meth:`next_states`, at most
-        ``STEP_TRIES`` of them in turn, ``STEP_TIMEOUT_S`` each), not for the whole way to the goal: in a
-        world apart from the model the rest of a plan is replanned anyway. First, when
-        :meth:`_cinch_reason` gives a reason, the answer is that reason: the episode pulls the rope tight
-        and lets it go (the world's ``cinch``) and plans from what it sees then."""
-        started = time.perf_counter()
-        made = self._configuration(points)
-        if isinstance(made, Replan):
-            return made
-        configuration_id, p_data, residual = made
-        reason = self._cinch_reason(p_data)
-        if reason is not None:
-            return Replan(None, None, time.perf_counter() - started, residual, reason)
-        run_id: int | None = None
-        targets = self.next_states(p_data)
-        # one curve to one of the first few next states; else any path of curves to the first
-        tries = [(t, ONE_ACTION_TIMEOUT_S, True) for t in targets[:STEP_TRIES]]
-        tries += [(t, STEP_TIMEOUT_S, False) for t in targets[:1]]
-        for target, limit_s, one_action in tries:
-            remaining = timeout_s - (time.perf_counter() - started)
-            if remaining <= 0:
-                return Replan(run_id, None, time.perf_counter() - started, residual, OUT_OF_TIME)
-            budget = min(limit_s, max(remaining, 1.0))
-            try:
-                run_id, solved = self.search(
-                    configuration_id, seed, budget, target.key, tighten=False, one_action=one_action
-                )
-            except PlanInputError as exc:
-                return Replan(run_id, None, time.perf_counter() - started, residual, str(exc))
-            if solved:
-                plan = plan_of_run(self.store, run_id)
-                return Replan(run_id, plan, time.perf_counter() - started, residual)
-        reason = None if run_id is not None else f"no high-level plan from {p_data.key}"
-        return Replan(run_id, None, time.perf_counter() - started, residual, reason)
+        return Replan(run_id, plan, time.perf_counter() - started, fit.residual_m)
 
 
 @dataclass
@@ -291,7 +177,6 @@ class EpisodeSettings:
     timeout_s: float
     max_actions: int = DEFAULT_MAX_ACTIONS
     drift_m: float = DEFAULT_DRIFT_M
-    replan: str = "step"  # closed loop: one "step" at a time, or "search" the whole way to the goal (15.4)
 
 
 @dataclass
@@ -484,8 +369,7 @@ class Episode:
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        planner = self.planner.replan_step if self.settings.replan == "step" else self.planner.replan
-        replanned = planner(state.points, seed, remaining_s)
+        replanned = self.planner.replan(state.points, seed, remaining_s)
         state.replans += 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
@@ -507,26 +391,9 @@ class Episode:
             plan_step=0,
         )
         state.fit_in_goal = replanned.reason == FIT_IN_GOAL
-        if replanned.reason in (CINCH_FIRST, UNTANGLE):
-            self._cinch(state)
-        elif replanned.run_id is None and not state.fit_in_goal and replanned.reason != OUT_OF_TIME:
+        if replanned.run_id is None and not state.fit_in_goal:
             return "lost"
         return None
-
-    def _cinch(self, state: EpisodeState) -> None:
-        """A step replan's cinch: the world's rope pulled tight by both ends and let go, observed."""
-        seen = self.world.cinch()
-        state.actions += 1
-        state.points = seen.points
-        observed = _observed(seen.points)
-        self.progress(f"action {state.actions}: cinch -> {observed.key if observed else '?'}")
-        self._record(
-            state,
-            "cinch",
-            **self._observation(seen.points),
-            fault=seen.fault,
-            world_checkpoint=self.world.checkpoint(),
-        )
 
     def _act(self, state: EpisodeState) -> None:
         from twisted.sim import Curve
@@ -587,7 +454,6 @@ def run_episode(
         world_seed=seed,
         physics=world.physics.to_dict(),
         closed_loop=settings.closed_loop,
-        replan=settings.replan if settings.closed_loop else None,
         timeout_s=settings.timeout_s,
         max_actions=settings.max_actions,
     )

@@ -34,7 +34,6 @@ class RobustnessRow:
     knot: str
     level: str
     closed_loop: bool
-    replan: str | None  # closed loop: how it replanned (search, step); open loop: None
     episodes: int
     tied: int
     actions_per_success: float | None
@@ -42,11 +41,6 @@ class RobustnessRow:
     planning_s_per_success: float | None
     wall_s_per_success: float | None
     median_replan_s: float | None = None  # planning time of one replan, median over every episode's replans
-
-    @property
-    def loop(self) -> str:
-        """``open``, or ``closed`` with its replan mode (``closed, step``)."""
-        return f"closed, {self.replan}" if self.closed_loop else "open"
 
     @property
     def success(self) -> float:
@@ -57,7 +51,6 @@ class RobustnessRow:
             "knot": self.knot,
             "level": self.level,
             "loop": "closed" if self.closed_loop else "open",
-            "replan": self.replan,
             "episodes": self.episodes,
             "tied": self.tied,
             "success": round(self.success, 3),
@@ -82,8 +75,7 @@ def _level_key(level: str) -> tuple[int, str]:
 
 
 def robustness_table(store: Any) -> list[RobustnessRow]:
-    """Every finished episode, grouped by (knot, level, loop and replan mode), in knot, level (none ..
-    strong), loop order."""
+    """Every finished episode, grouped by (knot, level, loop), in knot, level (none .. strong), loop order."""
     from twisted.store.episodes import EpisodeRow, EpisodeStep
 
     with store.session() as session:
@@ -92,7 +84,6 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeRow.goal_knot,
                 EpisodeRow.level,
                 EpisodeRow.closed_loop,
-                EpisodeRow.replan,
                 EpisodeRow.outcome,
                 EpisodeRow.actions,
                 EpisodeRow.replans,
@@ -101,13 +92,7 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
             ).where(EpisodeRow.outcome.in_(FINISHED))
         ).all()
         replans = session.execute(
-            select(
-                EpisodeRow.goal_knot,
-                EpisodeRow.level,
-                EpisodeRow.closed_loop,
-                EpisodeRow.replan,
-                EpisodeStep.planning_s,
-            )
+            select(EpisodeRow.goal_knot, EpisodeRow.level, EpisodeRow.closed_loop, EpisodeStep.planning_s)
             .join(EpisodeStep, EpisodeStep.episode_id == EpisodeRow.run_id)
             .where(
                 EpisodeRow.outcome.in_(FINISHED),
@@ -115,36 +100,28 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeStep.planning_s.is_not(None),
             )
         ).all()
-    Key = tuple[str, str, bool, str]
-
-    def key(r: Any) -> Key:
-        closed = bool(r.closed_loop)
-        return (r.goal_knot, r.level, closed, (r.replan or "search") if closed else "")
-
-    groups: dict[Key, list[Any]] = {}
+    groups: dict[tuple[str, str, bool], list[Any]] = {}
     for r in rows:
-        groups.setdefault(key(r), []).append(r)
-    replan_s: dict[Key, list[float]] = {}
+        groups.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(r)
+    replan_s: dict[tuple[str, str, bool], list[float]] = {}
     for r in replans:
-        replan_s.setdefault(key(r), []).append(float(r.planning_s))
+        replan_s.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(float(r.planning_s))
     table = []
-    for group_key in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2], k[3])):
-        knot, level, closed, mode = group_key
-        group = groups[group_key]
+    for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
+        group = groups[(knot, level, closed)]
         tied = [r for r in group if r.outcome == "tied"]
         table.append(
             RobustnessRow(
                 knot,
                 level,
                 closed,
-                mode or None,
                 len(group),
                 len(tied),
                 _mean([r.actions for r in tied]),
                 _mean([r.replans for r in tied]),
                 _mean([r.planning_s for r in tied]),
                 _mean([r.elapsed_s for r in tied]),
-                _median(replan_s.get(group_key, [])),
+                _median(replan_s.get((knot, level, closed), [])),
             )
         )
     return table
@@ -162,14 +139,15 @@ def plot_robustness(table: Sequence[RobustnessRow], path: Path) -> Path:
     levels = sorted({r.level for r in table}, key=_level_key)
     fig, ax = plt.subplots(figsize=(7.0, 4.2))
     for knot in sorted({r.knot for r in table}):
-        loops = sorted({r.loop for r in table if r.knot == knot}, key=lambda text: (text != "open", text))
-        for loop in loops:
-            rows = {r.level: r for r in table if r.knot == knot and r.loop == loop}
+        for closed in (False, True):
+            rows = {r.level: r for r in table if r.knot == knot and r.closed_loop == closed}
+            if not rows:
+                continue
             xs = [i for i, level in enumerate(levels) if level in rows]
             ys = [rows[levels[i]].success for i in xs]
             n = sum(r.episodes for r in rows.values())
-            label = f"{knot}, {loop} loop ({n} episodes)"
-            ax.plot(xs, ys, marker="o", linestyle="--" if loop == "open" else "-", label=label)
+            label = f"{knot}, {'closed' if closed else 'open'} loop ({n} episodes)"
+            ax.plot(xs, ys, marker="o", linestyle="-" if closed else "--", label=label)
     ax.set_xticks(range(len(levels)), levels)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("perturbation level (docs/DESIGN.md section 15.2)")
@@ -193,7 +171,7 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
     ]
     for r in table:
         lines.append(
-            f"| {r.knot} | {r.level} | {r.loop} | {r.episodes} | {r.tied} "
+            f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
             f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
             f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} |"
         )
@@ -240,17 +218,17 @@ def model_plan(
     return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
 
 
-def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, str | None]]:
-    """(level, world seed, replan mode: None for open loop) of the finished episodes of a plan."""
+def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool]]:
+    """(level, world seed, closed loop) of the finished episodes of a plan."""
     from twisted.store.episodes import EpisodeRow
 
     with store.session() as session:
         rows = session.execute(
-            select(EpisodeRow.level, EpisodeRow.world_seed, EpisodeRow.closed_loop, EpisodeRow.replan).where(
+            select(EpisodeRow.level, EpisodeRow.world_seed, EpisodeRow.closed_loop).where(
                 EpisodeRow.plan_run_id == plan_run_id, EpisodeRow.outcome.in_(FINISHED)
             )
         ).all()
-    return {(r.level, int(r.world_seed), (r.replan or "search") if r.closed_loop else None) for r in rows}
+    return {(r.level, int(r.world_seed), bool(r.closed_loop)) for r in rows}
 
 
 def run_robustness(
@@ -282,7 +260,7 @@ def run_robustness(
                     for closed in loops:
                         if stop():
                             return results
-                        if (level.name, seed, settings.replan if closed else None) in done:
+                        if (level.name, seed, closed) in done:
                             continue
                         episode = replace(settings, closed_loop=closed)
                         result = run_episode(store, plan, goal, planner, level, seed, episode)

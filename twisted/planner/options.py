@@ -163,13 +163,6 @@ class PlannerOptions:
         before=False,
         before_in_evals=True,
     )
-    one_action: bool = option(
-        False,
-        "Search for one action from the start: only curves from the start that change its state are kept, "
-        "so the plan found is one curve (a world's step replans, docs/DESIGN.md section 15.4).",
-        commands=("plan",),
-        before=False,
-    )
     tighten: bool = option(
         False,
         "Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a little, "

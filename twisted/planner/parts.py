@@ -628,25 +628,6 @@ class BothWays:
         return p_data not in self.goal
 
 
-class OneAction:
-    """A search for one action (``--one-action``; a world's step replans, docs/DESIGN.md section 15.4): only
-    results of a curve from the root that leave the root's state enter ``T``, and only the root's state gets
-    plans, so every plan step starts from the root and a goal node is one curve away from it. ``inner`` (the
-    growth the search would have) still decides which results are kept.
-
-    The root is the only node of its state (a result in the root's state is not kept), so a parent in the
-    root's state is the root."""
-
-    def __init__(self, inner: Growth, start: PData) -> None:
-        self.inner, self.start = inner, start.key
-
-    def keeps(self, parent: PData, p_data: PData) -> bool:
-        return parent.key == self.start and p_data.key != self.start and self.inner.keeps(parent, p_data)
-
-    def wants_plans(self, p_data: PData) -> bool:
-        return p_data.key == self.start and self.inner.wants_plans(p_data)
-
-
 # --- one iteration -----------------------------------------------------------------------------------------
 
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from twisted.goals import Goal, PlanInputError, state_goal
-from twisted.planner.parts import AddingMoves, OneAction, PullTest, SearchParts, default_parts
+from twisted.planner.parts import PullTest, SearchParts, default_parts
 from twisted.planner.search import (
     Checkpoint,
     CurveSampler,
@@ -188,10 +188,6 @@ def search_parts(
 
         goal_test = PullTest(goal, record)
     variant = both_ways_parts(parameters, goal, start) if parameters is not None and start is not None else {}
-    if options.one_action:
-        if start is None:
-            raise ValueError("one_action: the search needs its start state")
-        variant["growth"] = OneAction(variant.get("growth") or AddingMoves(goal), start)
     return default_parts(options, goal, sampler, goal_test, **variant)
 
 

@@ -49,7 +49,6 @@ from twisted.store.queries import end_run, start_run
 
 __all__ = [
     "EPISODE_OUTCOMES",
-    "REPLAN_MODES",
     "STEP_KINDS",
     "EpisodeRow",
     "EpisodeStep",
@@ -62,7 +61,6 @@ __all__ = [
     "reopen_episode",
 ]
 
-REPLAN_MODES = ("search", "step")
 EPISODE_OUTCOMES = ("running", "tied", "not_tied", "out_of_budget", "lost", "interrupted")
 STEP_KINDS = ("reset", "curve", "cinch", "replan", "pull_test")
 
@@ -80,7 +78,6 @@ class EpisodeRow(Base):
     world_seed: Mapped[int] = mapped_column(BigInteger)
     physics: Mapped[dict[str, Any]] = mapped_column(JSON)
     closed_loop: Mapped[bool] = mapped_column(Boolean)
-    replan: Mapped[str | None] = mapped_column(String(8))  # closed loop: search | step (0017); open: NULL
     timeout_s: Mapped[float] = mapped_column(Float)
     max_actions: Mapped[int] = mapped_column(Integer)
     outcome: Mapped[str] = mapped_column(String(16), index=True)
@@ -160,7 +157,6 @@ class StoredEpisode:
     level_ranges: dict[str, Any]
     world_seed: int
     closed_loop: bool
-    replan: str | None
     timeout_s: float
     max_actions: int
     outcome: str
@@ -246,9 +242,6 @@ def load_episode(store: Any, episode_id: int) -> StoredEpisode:
             raise EpisodeError(f"run {episode_id} is not an episode in this database")
         if not isinstance(row.level_ranges, dict) or row.outcome not in EPISODE_OUTCOMES:
             raise EpisodeError(f"episode {episode_id}: its stored level or outcome does not read back")
-        if row.closed_loop and row.replan not in REPLAN_MODES:
-            mode = f"{row.replan!r:.40}"
-            raise EpisodeError(f"episode {episode_id}: its stored replan mode {mode} does not read back")
         rows = session.scalars(
             select(EpisodeStep).where(EpisodeStep.episode_id == episode_id).order_by(EpisodeStep.seq)
         ).all()
@@ -263,7 +256,6 @@ def load_episode(store: Any, episode_id: int) -> StoredEpisode:
             level_ranges=dict(row.level_ranges),
             world_seed=int(row.world_seed),
             closed_loop=bool(row.closed_loop),
-            replan=row.replan if row.closed_loop else None,
             timeout_s=float(row.timeout_s),
             max_actions=int(row.max_actions),
             outcome=row.outcome,
