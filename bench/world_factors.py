@@ -23,15 +23,15 @@ from twisted.topology import top
 from twisted.world import LEVELS, SimWorld
 
 FACTORS = (
-    ("friction",),
-    ("stiffness",),
-    ("damping",),
-    ("mass",),
-    ("radius_m",),
-    ("grasp_off_by_one_p",),
-    ("carry_noise_m",),
-    ("lift_noise_m",),
-    ("observation_noise_m",),
+    "friction",
+    "stiffness",
+    "damping",
+    "mass",
+    "radius_m",
+    "grasp_off_by_one_p",
+    "carry_noise_m",
+    "lift_noise_m",
+    "observation_noise_m",
 )
 
 
@@ -46,9 +46,8 @@ def main() -> None:
         plan = plan_of_run(store, args.run)
     level, none = LEVELS[args.level], LEVELS["none"]
     rows = [("none", none)]
-    for names in FACTORS:
-        changes = {name: getattr(level, name) for name in names}
-        rows.append(("+".join(names), dataclasses.replace(none, name=args.level, **changes)))
+    for factor in FACTORS:
+        rows.append((factor, dataclasses.replace(none, name=args.level, **{factor: getattr(level, factor)})))
     rows.append((f"all of {args.level}", level))
     print(f"plan of run {args.run}: {len(plan.steps)} steps; {args.draws} worlds per row")
     print(f"{'factor':22s} {'actions on plan':>15s} {'worlds on track':>15s}  on track after each step")

@@ -239,7 +239,7 @@ def ties_goal(goal: Goal, p_data: PData) -> bool:
         return False
     from twisted.knots import identify
 
-    return identify(p_data).name in goal.knot_types
+    return goal.tightened_ties(identify(p_data).name)
 
 
 def _drift(points: FloatArray, step: PlanStep) -> float:
