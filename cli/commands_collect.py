@@ -295,7 +295,13 @@ def db_command(
         }
         stored = session.get(StoredRope, ROPE_ROW_ID) if "rope_profile" in present else None
     where = store.url.render_as_string(hide_password=True)
-    rope = None if stored is None else {"n_links": stored.n_links, "link_spacing_m": stored.link_spacing_m}
+    rope = None
+    if stored is not None:
+        rope = {
+            "n_links": stored.n_links,
+            "link_spacing_m": stored.link_spacing_m,
+            "max_crossings": stored.max_crossings,
+        }
     if as_json:
         print_json(
             {

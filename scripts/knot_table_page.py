@@ -1,22 +1,32 @@
 """Write the knot table's pictures and rows for docs/knots.md (issue 65).
 
-    PYTHONPATH=. python scripts/knot_table_page.py [--out docs/img/knots]
+    PYTHONPATH=. python scripts/knot_table_page.py [--out docs/img/knots] [--measured DB LABEL ...]
 
 For every knot of the table (``twisted knots list``) it writes the Gauss diagram of its first goal
 state (by key) as a small SVG, drawn by :func:`twisted.browse.svg.gauss_svg` (what ``twisted browse``
 shows), and prints the page's table rows: the knot's KnotInfo name (linked to KnotInfo's picture of it),
 its type and common names, crossing number, goal states, the picture and the columns the measurement
-fills (``not yet measured`` until it does). Nothing is measured here.
+fills. Nothing is measured here: ``--measured DB LABEL`` (a SQLite file and the ``eval --label`` of a
+measurement in it; repeatable, the first that holds a knot gives its row) reads ``eval_results``,
+read-only, and for the first solved seed of each knot draws its pulled-tight rope with ``twisted render
+--run N --tightened`` (run with the store's own ``TWISTED_ROPE``); a knot no store holds reads ``not yet
+measured``. A figure on another rope than the default names it.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import sqlite3
+import statistics
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from twisted.browse.svg import gauss_svg
 from twisted.knots import CATALOGUE, KNOT_NAMES, crossing_number, knotinfo_name, minimal_states
-from twisted.rope import MAX_CROSSINGS
+from twisted.rope import DEFAULT_ROPE, MAX_CROSSINGS, RopeProfile
 
 KNOTINFO_PAGE = "https://knotinfo.org/diagram_display.php?{name}"
 
@@ -31,12 +41,89 @@ def _also(knot_type: str) -> str:
     return ", ".join(f"`{n}`" for n in names) or "-"
 
 
+@dataclass
+class Measured:
+    """One knot's rows of a measurement: (solved, wall seconds, simulator calls, plan run) per seed."""
+
+    rope: RopeProfile
+    seeds: list[tuple[bool, float | None, int | None, int | None]]
+
+
+def _read_measurement(path: Path, label: str) -> dict[str, Measured]:
+    """The knot goals of ``label`` in the SQLite store ``path`` (read-only), by knot type; finished rows
+    only (solved or out of time), each value checked for its type."""
+    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+    try:
+        row = conn.execute("SELECT n_links, link_spacing_m, max_crossings FROM rope_profile").fetchone()
+        rope = RopeProfile(int(row[0]), float(row[1]), int(row[2]))
+        rows = conn.execute(
+            "SELECT goal_key, seed, solved, wall_s, sim_calls, plan_run_id FROM eval_results "
+            "WHERE planner = ? AND status IN ('solved', 'timeout') ORDER BY goal_key, seed LIMIT 10000",
+            (label,),
+        ).fetchall()
+    finally:
+        conn.close()
+    found: dict[str, Measured] = {}
+    for goal_key, _seed, solved, wall_s, calls, run_id in rows:
+        if not (isinstance(goal_key, str) and goal_key.startswith("knot:") and "@" in goal_key):
+            continue
+        knot_type = goal_key[len("knot:") : goal_key.rindex("@")]
+        entry = found.setdefault(knot_type, Measured(rope, []))
+        entry.seeds.append(
+            (
+                bool(solved),
+                float(wall_s) if isinstance(wall_s, (int, float)) else None,
+                int(calls) if isinstance(calls, int) else None,
+                int(run_id) if isinstance(run_id, int) else None,
+            )
+        )
+    return found
+
+
+def _pulled_tight(path: Path, measured: Measured, png: Path) -> bool:
+    """Draw the first solved seed's rope pulled tight to ``png`` (``twisted render --tightened``)."""
+    run = next((run_id for solved, _w, _c, run_id in measured.seeds if solved and run_id is not None), None)
+    if run is None:
+        return False
+    env = {k: v for k, v in os.environ.items() if k != "TWISTED_ROPE"}
+    if measured.rope != DEFAULT_ROPE:
+        env["TWISTED_ROPE"] = measured.rope.env_value
+    command = [sys.executable, "-m", "cli.main", "--db", f"sqlite:///{path}", "--force", "render"]
+    command += ["--run", str(run), "--tightened", "--out", str(png)]
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        print(f"render of run {run} in {path} failed: {done.stderr.strip()}", file=sys.stderr)
+    return done.returncode == 0
+
+
+def _measured_columns(knot_type: str, measured: Measured | None, picture: str | None) -> list[str]:
+    if measured is None:
+        return ["not yet measured"] * 4
+    seeds = measured.seeds
+    solved = [s for s in seeds if s[0]]
+    on = "" if measured.rope == DEFAULT_ROPE else f" ({measured.rope.n_links} links)"
+    walls = [w for ok, w, _c, _r in solved if w is not None]
+    calls = [c for ok, _w, c, _r in solved if c is not None]
+    wall = f"{statistics.median(walls):.1f} s" if walls else "-"
+    median_calls = f"{statistics.median(calls):,.0f}" if calls else "-"
+    shown = f"![{knot_type} pulled tight]({picture})" if picture else "-"
+    return [f"{len(solved)} / {len(seeds)}{on}", wall, median_calls, shown]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("docs/img/knots"), help="where the SVGs go")
+    parser.add_argument(
+        "--measured",
+        nargs=2,
+        action="append",
+        default=[],
+        metavar=("DB", "LABEL"),
+        help="a SQLite store and the eval --label of a measurement in it (repeatable)",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    not_measured = "not yet measured"
+    stores = [(Path(db), _read_measurement(Path(db), label)) for db, label in args.measured]
     print(
         "| KnotInfo | type | also typed as | crossings | goal states | a goal state (Gauss diagram) | "
         "success (5 seeds) | median wall time | median calls | pulled tight |"
@@ -50,11 +137,16 @@ def main() -> None:
         parts = knotinfo_name(knot_type).split("#")
         linked = " # ".join(f"[{p}]({KNOTINFO_PAGE.format(name=p)})" for p in parts)
         crossings = crossing_number(knot_type)
-        measured = (
-            [not_measured] * 4
-            if crossings <= MAX_CROSSINGS
-            else [f"not plannable: the model encodes at most {MAX_CROSSINGS} crossings", "-", "-", "-"]
-        )
+        where = next(((path, found[knot_type]) for path, found in stores if knot_type in found), None)
+        if where is None and crossings > MAX_CROSSINGS:
+            measured = [f"not plannable: the model encodes at most {MAX_CROSSINGS} crossings", "-", "-", "-"]
+        else:
+            tight = None
+            if where is not None:
+                png = args.out / _file_name(knot_type).replace(".svg", "_tight.png")
+                if _pulled_tight(where[0], where[1], png):
+                    tight = f"img/knots/{png.name}"
+            measured = _measured_columns(knot_type, None if where is None else where[1], tight)
         picture = f"![a state tying {knot_type}](img/knots/{_file_name(knot_type)})"
         row = [linked, f"`{knot_type}`", _also(knot_type), str(crossings), str(len(states)), picture]
         row += measured

@@ -81,6 +81,14 @@ def _stored_rope(path: Path) -> list[tuple[int, float]]:
         conn.close()
 
 
+def _stored_limit(path: Path) -> int:
+    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+    try:
+        return int(conn.execute("SELECT max_crossings FROM rope_profile").fetchone()[0])
+    finally:
+        conn.close()
+
+
 # --- the profile ------------------------------------------------------------------------------------------
 
 
@@ -92,6 +100,14 @@ def test_parse_rope_reads_links_and_an_optional_spacing() -> None:
     assert DEFAULT_ROPE.name == "21 links x 0.04 m (0.84 m)"
     assert parse_rope("31").env_value == "31" and parse_rope("31x0.03").env_value == "31x0.03"
     assert ROPE == DEFAULT_ROPE  # the tests run without TWISTED_ROPE
+
+
+def test_parse_rope_reads_an_optional_crossing_limit() -> None:
+    assert parse_rope("31c7") == RopeProfile(31, 0.04, 7) != RopeProfile(31, 0.04)
+    assert parse_rope("31x0.03C8") == RopeProfile(31, 0.03, 8)
+    assert parse_rope("21c6") == DEFAULT_ROPE and DEFAULT_ROPE.max_crossings == 6
+    assert parse_rope("31c7").env_value == "31c7" and parse_rope("31x0.03c7").env_value == "31x0.03c7"
+    assert parse_rope("31c7").name == "31 links x 0.04 m (1.24 m), states of up to 7 crossings"
 
 
 @pytest.mark.parametrize(
@@ -106,6 +122,11 @@ def test_parse_rope_reads_links_and_an_optional_spacing() -> None:
         ("31xnan", "the spacing must be a positive length"),
         ("31x0.1", "links 0.1 m apart is out of range"),
         ("40", "a rope of 40 links x 0.04 m (1.60 m) is longer than 1.4 m"),
+        ("31c", "the crossing limit '' is not an integer"),
+        ("31c7.5", "the crossing limit '7.5' is not an integer"),
+        ("31c2", "a crossing limit of 2 is out of range (give 3 to 8)"),
+        ("31c9", "a crossing limit of 9 is out of range (give 3 to 8)"),
+        ("11c7", "11 links cannot lay out 7 crossings (14 visits along the rope): give at least 13 links"),
     ],
 )
 def test_parse_rope_says_which_value_is_wrong_and_why(value: str, message: str) -> None:
@@ -169,7 +190,9 @@ def test_a_read_only_open_records_nothing(sqlite_url: str, tmp_path: Path) -> No
     assert _stored_rope(path) == [] and _digest(path) == before
 
 
-@pytest.mark.parametrize(("made_by", "opened_by"), [(None, "31"), ("31", None), ("31", "31x0.03")])
+@pytest.mark.parametrize(
+    ("made_by", "opened_by"), [(None, "31"), ("31", None), ("31", "31x0.03"), ("31c7", "31"), (None, "21c7")]
+)
 def test_a_store_of_one_rope_refuses_a_process_of_another(
     tmp_path: Path, made_by: str | None, opened_by: str | None
 ) -> None:
@@ -191,6 +214,7 @@ def test_a_store_of_one_rope_refuses_a_process_of_another(
             assert f"`TWISTED_ROPE={made_by} twisted ...`" in message
     assert _digest(path) == before and sorted(tmp_path.iterdir()) == files
     assert _stored_rope(path) == [(made.n_links, made.link_spacing_m)]
+    assert _stored_limit(path) == made.max_crossings
 
 
 def test_open_store_raises_rope_mismatch_naming_both(tmp_path: Path) -> None:
@@ -237,7 +261,7 @@ def test_a_store_made_before_the_rope_profile_is_tagged_21_links(tmp_path: Path)
     assert _stored_rope(empty) == [(31, 0.04)]
     with open_store(f"sqlite:///{old}") as store, store.engine.connect() as conn:
         revisions = {r[0] for r in conn.execute(text("SELECT version_num FROM alembic_version"))}
-    assert revisions == head_revisions() and "0013" in revisions
+    assert revisions == head_revisions() and "0017" in revisions
 
 
 def test_a_store_from_before_the_rope_profile_refuses_another_rope_before_upgrading(tmp_path: Path) -> None:
@@ -265,7 +289,10 @@ def test_twisted_db_shows_the_rope(tmp_path: Path) -> None:
     result = _twisted("31", "--db", f"sqlite:///{path}", "db", "--json")
     assert result.returncode == 0, result.stderr
     shown = json.loads(result.stdout)
-    assert shown["rope"] == {"n_links": 31, "link_spacing_m": 0.04} and shown["rows"]["rope_profile"] == 1
+    assert (
+        shown["rope"] == {"n_links": 31, "link_spacing_m": 0.04, "max_crossings": 6}
+        and shown["rows"]["rope_profile"] == 1
+    )
     result = _twisted("31", "--db", f"sqlite:///{path}", "db")
     assert "rope: 31 links x 0.04 m (1.24 m)" in result.stdout
 
@@ -373,3 +400,33 @@ def test_models_stored_before_the_rope_field_are_21_links() -> None:
     with pytest.raises(ModelRopeError, match="run with TWISTED_ROPE=31 to use it"):
         NetConfig.from_dict({**legacy, "n_links": 31}).check_rope()
     assert np.isclose(NetConfig().link_spacing_m, 0.04)
+
+
+def test_a_rope_with_a_crossing_limit_of_7_encodes_and_accepts_a_7_crossing_knot() -> None:
+    """The crossing limit is the rope's: a process running ``31c7`` encodes a state of 7_1 and takes it as a
+    goal (the model's input widened by two visits and one count); the default rope refuses it."""
+    code = (
+        "from twisted.goals import make_goal\n"
+        "from twisted.model.encoding import P_DATA_DIM, encode_p_data\n"
+        "from twisted.rope import MAX_CROSSINGS\n"
+        "goal = make_goal(knot='7_1+')\n"
+        "print(MAX_CROSSINGS, P_DATA_DIM, encode_p_data(goal.states[0]).shape[0], goal.states[0].cross)\n"
+    )
+    seven = _python(code, "31c7")
+    assert seven.returncode == 0, seven.stderr
+    limit, dim, encoded, cross = map(int, seven.stdout.split())
+    assert (limit, cross) == (7, 7) and encoded == dim
+    six = _python(code, None)
+    assert (
+        six.returncode != 0
+        and "the model encodes at most 6" in six.stderr
+        and "TWISTED_ROPE=21c7" in six.stderr
+    )
+    default_dim = _python("from twisted.model.encoding import P_DATA_DIM\nprint(P_DATA_DIM)", None)
+    assert int(default_dim.stdout) < dim
+
+
+def test_a_model_of_another_crossing_limit_is_refused() -> None:
+    with pytest.raises(ModelRopeError, match="states of up to 7 crossings.*TWISTED_ROPE=21c7"):
+        NetConfig(max_crossings=7).check_rope()
+    assert NetConfig.from_dict({"n_links": 21, "link_spacing_m": 0.04}).max_crossings == 6  # stored before

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-from twisted.rope import MAX_CROSSINGS
+from twisted.rope import MAX_CROSSINGS, ROPE, ROPE_ENV
 from twisted.topology import PData
 
 __all__ = [
@@ -269,6 +269,9 @@ def make_goal(
         raise PlanInputError(str(exc)) from None
     if found.cross > max_cross:
         raise PlanInputError(
-            f"knot goal {found.spec} has {found.cross} crossings; the model encodes at most {max_cross}"
+            f"knot goal {found.spec} has {found.cross} crossings; the model encodes at most {max_cross}, "
+            "the rope's crossing limit: a rope that names a higher one "
+            f"({ROPE_ENV}={ROPE.n_links}c{found.cross}, docs/DESIGN.md section 2.6), with a model trained "
+            "on it, can plan it"
         )
     return found

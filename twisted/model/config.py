@@ -40,10 +40,12 @@ class NetConfig:
     # follow the link count, and its inputs are scaled by the rope's length
     n_links: int = ROPE.n_links
     link_spacing_m: float = ROPE.link_spacing_m
+    # the rope's crossing limit: the input has room for states of this many crossings
+    max_crossings: int = ROPE.max_crossings
 
     @property
     def rope(self) -> RopeProfile:
-        return RopeProfile(self.n_links, self.link_spacing_m)
+        return RopeProfile(self.n_links, self.link_spacing_m, self.max_crossings)
 
     def check_rope(self) -> None:
         """Raise :class:`ModelRopeError` unless the network is for the rope this process runs."""
@@ -59,11 +61,13 @@ class NetConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> NetConfig:
-        # models stored before the move input had none; before ropes could differ, no rope: the default's
+        # models stored before the move input had none; before ropes could differ (or name a crossing
+        # limit), no rope: the default's
         legacy = {
             "move": False,
             "n_links": DEFAULT_ROPE.n_links,
             "link_spacing_m": DEFAULT_ROPE.link_spacing_m,
+            "max_crossings": DEFAULT_ROPE.max_crossings,
         }
         d = {**legacy, **d}
         return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})

@@ -552,25 +552,32 @@ _OPEN_ATTEMPTS = 5
 
 def _stored_rope(conn: Connection) -> Any:
     """The rope recorded in ``rope_profile`` (a :class:`twisted.rope.RopeProfile`), or None."""
-    from twisted.rope import RopeProfile
+    from twisted.rope import DEFAULT_MAX_CROSSINGS, RopeProfile
 
-    row = conn.execute(text("SELECT n_links, link_spacing_m FROM rope_profile ORDER BY id LIMIT 1")).first()
+    # before revision 0017 the table has no crossing limit: every such store was made with the default's
+    columns = {c["name"] for c in inspect(conn).get_columns("rope_profile")}
+    limit = "max_crossings" if "max_crossings" in columns else str(DEFAULT_MAX_CROSSINGS)
+    row = conn.execute(
+        text(f"SELECT n_links, link_spacing_m, {limit} FROM rope_profile ORDER BY id LIMIT 1")
+    ).first()
     if row is None:
         return None
-    n_links, spacing = row
-    # read back, the row is input: an integer count and a finite positive length, or the store is refused
+    n_links, spacing, max_crossings = row
+    # read back, the row is input: integer counts and a finite positive length, or the store is refused
     if not (
         type(n_links) is int
         and 0 < n_links <= 100_000
         and type(spacing) in (int, float)
         and math.isfinite(spacing)
         and spacing > 0
+        and type(max_crossings) is int
+        and 1 <= max_crossings <= 100
     ):
         raise StoreError(
-            f"the database's rope_profile holds n_links {n_links!r:.40}, link_spacing_m {spacing!r:.40}: not "
-            "a rope (the row is damaged); nothing was changed"
+            f"the database's rope_profile holds n_links {n_links!r:.40}, link_spacing_m {spacing!r:.40}, "
+            f"max_crossings {max_crossings!r:.40}: not a rope (the row is damaged); nothing was changed"
         )
-    return RopeProfile(n_links, float(spacing))
+    return RopeProfile(n_links, float(spacing), max_crossings)
 
 
 def _peek_rope(conn: Connection) -> Any:
@@ -614,6 +621,7 @@ def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
                         "id": ROPE_ROW_ID,
                         "n_links": ROPE.n_links,
                         "link_spacing_m": ROPE.link_spacing_m,
+                        "max_crossings": ROPE.max_crossings,
                         "created_at": utcnow(),
                     }
                     conn.execute(insert(StoredRope).values(**values))
