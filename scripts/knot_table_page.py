@@ -25,8 +25,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twisted.browse.svg import gauss_svg
-from twisted.knots import CATALOGUE, KNOT_NAMES, crossing_number, knotinfo_name, minimal_states
-from twisted.rope import DEFAULT_ROPE, MAX_CROSSINGS, RopeProfile
+from twisted.knots import (
+    CATALOGUE,
+    KNOT_NAMES,
+    crossing_number,
+    knotinfo_name,
+    minimal_states,
+    resolve_knot,
+)
+from twisted.rope import DEFAULT_MAX_CROSSINGS, DEFAULT_ROPE, MAX_CROSSINGS, RopeProfile
 
 KNOTINFO_PAGE = "https://knotinfo.org/diagram_display.php?{name}"
 
@@ -54,7 +61,9 @@ def _read_measurement(path: Path, label: str) -> dict[str, Measured]:
     only (solved or out of time), each value checked for its type."""
     conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
     try:
-        row = conn.execute("SELECT n_links, link_spacing_m, max_crossings FROM rope_profile").fetchone()
+        columns = {c[1] for c in conn.execute("PRAGMA table_info(rope_profile)")}
+        limit = "max_crossings" if "max_crossings" in columns else str(DEFAULT_MAX_CROSSINGS)  # before 0017
+        row = conn.execute(f"SELECT n_links, link_spacing_m, {limit} FROM rope_profile").fetchone()
         rope = RopeProfile(int(row[0]), float(row[1]), int(row[2]))
         rows = conn.execute(
             "SELECT goal_key, seed, solved, wall_s, sim_calls, plan_run_id FROM eval_results "
@@ -67,8 +76,10 @@ def _read_measurement(path: Path, label: str) -> dict[str, Measured]:
     for goal_key, _seed, solved, wall_s, calls, run_id in rows:
         if not (isinstance(goal_key, str) and goal_key.startswith("knot:") and "@" in goal_key):
             continue
-        knot_type = goal_key[len("knot:") : goal_key.rindex("@")]
-        entry = found.setdefault(knot_type, Measured(rope, []))
+        types = resolve_knot(goal_key[len("knot:") : goal_key.rindex("@")])  # "granny+" is "3_1+#3_1+"
+        if len(types) != 1:
+            continue
+        entry = found.setdefault(next(iter(types)), Measured(rope, []))
         entry.seeds.append(
             (
                 bool(solved),
