@@ -7,10 +7,11 @@ state (by key) as a small SVG, drawn by :func:`twisted.browse.svg.gauss_svg` (wh
 shows), and prints the page's table rows: the knot's KnotInfo name (linked to KnotInfo's picture of it),
 its type and common names, crossing number, goal states, the picture and the columns the measurement
 fills. Nothing is measured here: ``--measured DB LABEL`` (a SQLite file and the ``eval --label`` of a
-measurement in it; repeatable, the first that holds a knot gives its row) reads ``eval_results``,
-read-only, and for the first solved seed of each knot draws its pulled-tight rope with ``twisted render
---run N --tightened`` (run with the store's own ``TWISTED_ROPE``); a knot no store holds reads ``not yet
-measured``. A figure on another rope than the default names it.
+measurement in it, or several labels joined by commas; repeatable) reads ``eval_results``, read-only.
+A knot's row has one line per store that measured it, naming the store's rope when it is not the
+default or when several did, and the picture of the first solved seed (of the first store that has
+one) pulled tight, drawn by ``twisted render --run N --tightened`` run with the store's own
+``TWISTED_ROPE``; a knot no store holds reads ``not yet measured``.
 """
 
 from __future__ import annotations
@@ -57,18 +58,22 @@ class Measured:
 
 
 def _read_measurement(path: Path, label: str) -> dict[str, Measured]:
-    """The knot goals of ``label`` in the SQLite store ``path`` (read-only), by knot type; finished rows
-    only (solved or out of time), each value checked for its type."""
+    """The knot goals of ``label`` (one ``eval --label``, or several joined by commas) in the SQLite store
+    ``path`` (read-only), by knot type; finished rows only (solved or out of time), each value checked for
+    its type."""
     conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
     try:
         columns = {c[1] for c in conn.execute("PRAGMA table_info(rope_profile)")}
         limit = "max_crossings" if "max_crossings" in columns else str(DEFAULT_MAX_CROSSINGS)  # before 0017
         row = conn.execute(f"SELECT n_links, link_spacing_m, {limit} FROM rope_profile").fetchone()
         rope = RopeProfile(int(row[0]), float(row[1]), int(row[2]))
+        labels = [name for name in label.split(",") if name]
+        marks = ", ".join("?" for _ in labels)
         rows = conn.execute(
             "SELECT goal_key, seed, solved, wall_s, sim_calls, plan_run_id FROM eval_results "
-            "WHERE planner = ? AND status IN ('solved', 'timeout') ORDER BY goal_key, seed LIMIT 10000",
-            (label,),
+            f"WHERE planner IN ({marks}) AND status IN ('solved', 'timeout') "
+            "ORDER BY goal_key, seed LIMIT 10000",
+            labels,
         ).fetchall()
     finally:
         conn.close()
@@ -107,18 +112,23 @@ def _pulled_tight(path: Path, measured: Measured, png: Path) -> bool:
     return done.returncode == 0
 
 
-def _measured_columns(knot_type: str, measured: Measured | None, picture: str | None) -> list[str]:
-    if measured is None:
+def _measured_columns(knot_type: str, found: list[Measured], picture: str | None) -> list[str]:
+    """The four measured columns of a knot's row: one line per store (its rope named when it is not the
+    default, or when several stores measured the knot), the picture of the first solved seed."""
+    if not found:
         return ["not yet measured"] * 4
-    seeds = measured.seeds
-    solved = [s for s in seeds if s[0]]
-    on = "" if measured.rope == DEFAULT_ROPE else f" ({measured.rope.n_links} links)"
-    walls = [w for ok, w, _c, _r in solved if w is not None]
-    calls = [c for ok, _w, c, _r in solved if c is not None]
-    wall = f"{statistics.median(walls):.1f} s" if walls else "-"
-    median_calls = f"{statistics.median(calls):,.0f}" if calls else "-"
+    columns: list[list[str]] = [[], [], []]
+    for measured in found:
+        solved = [s for s in measured.seeds if s[0]]
+        rope = measured.rope
+        on = f" ({rope.n_links} links)" if rope != DEFAULT_ROPE or len(found) > 1 else ""
+        walls = [w for _ok, w, _c, _r in solved if w is not None]
+        calls = [c for _ok, _w, c, _r in solved if c is not None]
+        columns[0].append(f"{len(solved)} / {len(measured.seeds)}{on}")
+        columns[1].append(f"{statistics.median(walls):.1f} s" if walls else "-")
+        columns[2].append(f"{statistics.median(calls):,.0f}" if calls else "-")
     shown = f"![{knot_type} pulled tight]({picture})" if picture else "-"
-    return [f"{len(solved)} / {len(seeds)}{on}", wall, median_calls, shown]
+    return ["<br>".join(column) for column in columns] + [shown]
 
 
 def main() -> None:
@@ -148,16 +158,14 @@ def main() -> None:
         parts = knotinfo_name(knot_type).split("#")
         linked = " # ".join(f"[{p}]({KNOTINFO_PAGE.format(name=p)})" for p in parts)
         crossings = crossing_number(knot_type)
-        where = next(((path, found[knot_type]) for path, found in stores if knot_type in found), None)
-        if where is None and crossings > MAX_CROSSINGS:
+        held = [(path, found[knot_type]) for path, found in stores if knot_type in found]
+        if not held and crossings > MAX_CROSSINGS:
             measured = [f"not plannable: the model encodes at most {MAX_CROSSINGS} crossings", "-", "-", "-"]
         else:
-            tight = None
-            if where is not None:
-                png = args.out / _file_name(knot_type).replace(".svg", "_tight.png")
-                if _pulled_tight(where[0], where[1], png):
-                    tight = f"img/knots/{png.name}"
-            measured = _measured_columns(knot_type, None if where is None else where[1], tight)
+            png = args.out / _file_name(knot_type).replace(".svg", "_tight.png")
+            drawn = any(_pulled_tight(path, measured, png) for path, measured in held)  # first that solved
+            tight = f"img/knots/{png.name}" if drawn else None
+            measured = _measured_columns(knot_type, [m for _p, m in held], tight)
         picture = f"![a state tying {knot_type}](img/knots/{_file_name(knot_type)})"
         row = [linked, f"`{knot_type}`", _also(knot_type), str(crossings), str(len(states)), picture]
         row += measured

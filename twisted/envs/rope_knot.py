@@ -19,8 +19,9 @@
   :meth:`RopeKnotEnv.compute_reward` is vectorised for hindsight relabelling. Truncation after
   ``max_curves`` curves.
 * A curve the simulator rejects (rope left the workspace, diverged, ...) or one that makes more than
-  ``MAX_CROSSINGS`` (6, the encoder's limit) crossings is a *failed curve*: the previous state is
-  restored, the step counts, reward -1, ``info["curve_failed"] = True`` with ``info["reason"]``.
+  ``MAX_CROSSINGS`` (the rope's crossing limit, 6 by default) crossings is a *failed curve*: the
+  previous state is restored, the step counts, reward -1, ``info["curve_failed"] = True`` with
+  ``info["reason"]``.
 """
 
 from __future__ import annotations
