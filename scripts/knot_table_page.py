@@ -147,7 +147,7 @@ def main() -> None:
     stores = [(Path(db), _read_measurement(Path(db), label)) for db, label in args.measured]
     print(
         "| KnotInfo | type | also typed as | crossings | goal states | a goal state (Gauss diagram) | "
-        "success (5 seeds) | median wall time | median calls | pulled tight |"
+        "tied / seeds (rope) | median wall time (tied) | median calls (tied) | pulled tight |"
     )
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for knot_type in CATALOGUE:

@@ -65,7 +65,7 @@ COMMANDS: dict[str, list[str]] = {
 }
 WRITERS = {"rl train --resume", "plan --resume", "untie", "plan"}  # may write when they accept what they read
 
-_ROPE = "rope_profile: id link_spacing_m n_links"
+_ROPE = "rope_profile: id link_spacing_m n_links max_crossings"
 _RUNS = (
     "runs: id kind parameters seed tried kept rejected wall_seconds sim_seconds host pid started_at ended_at "
     "message status"
