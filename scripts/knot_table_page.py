@@ -11,7 +11,8 @@ measurement in it, or several labels joined by commas; repeatable) reads ``eval_
 A knot's row has one line per store that measured it, naming the store's rope when it is not the
 default or when several did, and the picture of the first solved seed (of the first store that has
 one) pulled tight, drawn by ``twisted render --run N --tightened`` run with the store's own
-``TWISTED_ROPE``; a knot no store holds reads ``not yet measured``.
+``TWISTED_ROPE`` (that command opens the store to write: it upgrades an older schema and stores the pull
+test when none is stored); a knot no store holds reads ``not yet measured``.
 """
 
 from __future__ import annotations
