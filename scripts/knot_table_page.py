@@ -26,6 +26,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from sqlalchemy import create_engine, text
+
 from twisted.browse.svg import gauss_svg
 from twisted.knots import (
     CATALOGUE,
@@ -35,7 +37,8 @@ from twisted.knots import (
     minimal_states,
     resolve_knot,
 )
-from twisted.rope import DEFAULT_MAX_CROSSINGS, DEFAULT_ROPE, MAX_CROSSINGS, RopeProfile
+from twisted.rope import DEFAULT_ROPE, MAX_CROSSINGS, RopeProfile
+from twisted.store import stored_rope
 
 KNOTINFO_PAGE = "https://knotinfo.org/diagram_display.php?{name}"
 
@@ -62,22 +65,23 @@ def _read_measurement(path: Path, label: str) -> dict[str, Measured]:
     """The knot goals of ``label`` (one ``eval --label``, or several joined by commas) in the SQLite store
     ``path`` (read-only), by knot type; finished rows only (solved or out of time), each value checked for
     its type."""
-    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+    uri = f"{path.resolve().as_uri()}?mode=ro"
+    engine = create_engine("sqlite://", creator=lambda: sqlite3.connect(uri, uri=True))
+    labels = [name for name in label.split(",") if name]
+    marks = ", ".join(f":label{i}" for i in range(len(labels)))
     try:
-        columns = {c[1] for c in conn.execute("PRAGMA table_info(rope_profile)")}
-        limit = "max_crossings" if "max_crossings" in columns else str(DEFAULT_MAX_CROSSINGS)  # before 0017
-        row = conn.execute(f"SELECT n_links, link_spacing_m, {limit} FROM rope_profile").fetchone()
-        rope = RopeProfile(int(row[0]), float(row[1]), int(row[2]))
-        labels = [name for name in label.split(",") if name]
-        marks = ", ".join("?" for _ in labels)
-        rows = conn.execute(
-            "SELECT goal_key, seed, solved, wall_s, sim_calls, plan_run_id FROM eval_results "
-            f"WHERE planner IN ({marks}) AND status IN ('solved', 'timeout') "
-            "ORDER BY goal_key, seed LIMIT 10000",
-            labels,
-        ).fetchall()
+        with engine.connect() as conn:
+            rope = stored_rope(conn) or DEFAULT_ROPE  # the store's own reading, checked
+            rows = conn.execute(
+                text(
+                    "SELECT goal_key, seed, solved, wall_s, sim_calls, plan_run_id FROM eval_results "
+                    f"WHERE planner IN ({marks}) AND status IN ('solved', 'timeout') "
+                    "ORDER BY goal_key, seed LIMIT 10000"
+                ),
+                {f"label{i}": name for i, name in enumerate(labels)},
+            ).all()
     finally:
-        conn.close()
+        engine.dispose()
     found: dict[str, Measured] = {}
     for goal_key, _seed, solved, wall_s, calls, run_id in rows:
         if not (isinstance(goal_key, str) and goal_key.startswith("knot:") and "@" in goal_key):

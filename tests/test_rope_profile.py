@@ -13,6 +13,7 @@ import sqlite3
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -73,20 +74,20 @@ def _make_store(path: Path, rope: str | None) -> None:
     assert result.returncode == 0, result.stderr
 
 
-def _stored_rope(path: Path) -> list[tuple[int, float]]:
+def _select(path: Path, sql: str) -> list[Any]:
     conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
     try:
-        return conn.execute("SELECT n_links, link_spacing_m FROM rope_profile").fetchall()
+        return conn.execute(sql).fetchall()
     finally:
         conn.close()
+
+
+def _stored_rope(path: Path) -> list[tuple[int, float]]:
+    return _select(path, "SELECT n_links, link_spacing_m FROM rope_profile")
 
 
 def _stored_limit(path: Path) -> int:
-    conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
-    try:
-        return int(conn.execute("SELECT max_crossings FROM rope_profile").fetchone()[0])
-    finally:
-        conn.close()
+    return int(_select(path, "SELECT max_crossings FROM rope_profile")[0][0])
 
 
 # --- the profile ------------------------------------------------------------------------------------------

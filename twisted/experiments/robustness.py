@@ -100,12 +100,15 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeStep.planning_s.is_not(None),
             )
         ).all()
+    def key(r: Any) -> tuple[str, str, bool]:
+        return (r.goal_knot, r.level, bool(r.closed_loop))
+
     groups: dict[tuple[str, str, bool], list[Any]] = {}
     for r in rows:
-        groups.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(r)
+        groups.setdefault(key(r), []).append(r)
     replan_s: dict[tuple[str, str, bool], list[float]] = {}
     for r in replans:
-        replan_s.setdefault((r.goal_knot, r.level, bool(r.closed_loop)), []).append(float(r.planning_s))
+        replan_s.setdefault(key(r), []).append(float(r.planning_s))
     table = []
     for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
         group = groups[(knot, level, closed)]

@@ -12,6 +12,7 @@ from twisted.store.db import (
     head_revisions,
     open_store,
     parse_url,
+    stored_rope,
 )
 from twisted.store.models import (
     VIEW_NAMES,
@@ -44,4 +45,5 @@ __all__ = [
     "head_revisions",
     "open_store",
     "parse_url",
+    "stored_rope",
 ]

@@ -550,8 +550,9 @@ def open_store(
 _OPEN_ATTEMPTS = 5
 
 
-def _stored_rope(conn: Connection) -> Any:
-    """The rope recorded in ``rope_profile`` (a :class:`twisted.rope.RopeProfile`), or None."""
+def stored_rope(conn: Connection) -> Any:
+    """The rope recorded in ``rope_profile`` (a :class:`twisted.rope.RopeProfile`), or None; a row that is
+    no rope is a :class:`StoreError`. Reads only: a connection to a store opened read-only will do."""
     from twisted.rope import DEFAULT_MAX_CROSSINGS, RopeProfile
 
     # before revision 0017 the table has no crossing limit: every such store was made with the default's
@@ -587,7 +588,7 @@ def _peek_rope(conn: Connection) -> Any:
 
     tables = set(inspect(conn).get_table_names())
     if "rope_profile" in tables:
-        return _stored_rope(conn)
+        return stored_rope(conn)
     if "configurations" in tables and conn.execute(text("SELECT 1 FROM configurations LIMIT 1")).first():
         return DEFAULT_ROPE  # what migration 0013 will record
     return None
@@ -611,11 +612,11 @@ def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
     from twisted.store.rope_profile import ROPE_ROW_ID, StoredRope
 
     with engine.connect() as conn:
-        stored = _stored_rope(conn)
+        stored = stored_rope(conn)
     if stored is None and not readonly:
         try:
             with engine.execution_options(twisted_begin_immediate=True).begin() as conn:
-                stored = _stored_rope(conn)  # under the write lock: another process may have been first
+                stored = stored_rope(conn)  # under the write lock: another process may have been first
                 if stored is None:
                     values = {
                         "id": ROPE_ROW_ID,
@@ -628,7 +629,7 @@ def _check_rope(engine: Engine, where: str, readonly: bool) -> None:
                     stored = ROPE
         except IntegrityError:  # PostgreSQL: another process inserted it meanwhile
             with engine.connect() as conn:
-                stored = _stored_rope(conn)
+                stored = stored_rope(conn)
     _compare_rope(stored, where)
 
 
