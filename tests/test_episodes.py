@@ -21,8 +21,8 @@ from twisted.experiments.robustness import FINISHED, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
-from twisted.store.models import Run
-from twisted.store.search_tree import load_run
+from twisted.store.models import Run, blob_to_array
+from twisted.store.search_tree import SearchNode, load_run
 from twisted.world import LEVELS, SimWorld, World
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
@@ -124,9 +124,9 @@ class SeenByPlanner(ModelPlanner):
 
     given: list[tuple[Any, ...]]
 
-    def replan(self, points: Any, seed: int, timeout_s: float) -> Any:
-        self.given.append((points, seed, timeout_s))
-        return super().replan(points, seed, timeout_s)
+    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
+        self.given.append((points, seed, timeout_s, like))
+        return super().replan(points, seed, timeout_s, like)
 
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
@@ -173,11 +173,15 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
     assert result.replans >= 1 and planner.given
     protocol = {name for name in dir(World) if not name.startswith("_")}
     assert world.used <= protocol, world.used - protocol
-    for points, seed, timeout_s in planner.given:
+    for points, seed, timeout_s, _ in planner.given:
         assert isinstance(points, np.ndarray) and points.shape == (22, 3)
         assert isinstance(seed, int) and isinstance(timeout_s, float)
     # the replans start from configurations fitted to observations, stored under the episode's run
     with open_store(db) as store:
+        # what the model expects the rope to be (where the fit starts) is the model's own: a node's q
+        with store.session() as session:
+            model_qs = [blob_to_array(q) for q in session.scalars(select(SearchNode.q))]
+        assert all(any(np.array_equal(g[3], q) for q in model_qs) for g in planner.given)
         stored = load_episode(store, episode_id)
         replans = [s for s in stored.steps if s.kind == "replan"]
         assert len(replans) == result.replans and all(s.fit_residual_m is not None for s in replans)
@@ -260,6 +264,11 @@ def load_levels(store: Any) -> list[tuple[str, str]]:
         ["--loops", "sideways"],
         ["--knot", "granny-knot-of-doom"],
         ["--drift", "-1"],
+        ["--choose", "-1"],
+        ["--choose", "100000"],
+        ["--choose", "8", "--ensemble", "0"],
+        ["--choose", "8", "--imagine", "hurricane"],
+        ["--choose", "8", "--imagine", "none,friction=-1:1"],
     ],
 )
 def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path, args: list[str]) -> None:

@@ -165,8 +165,8 @@ def test_the_fit_of_a_crossed_rope_seen_through_noise_lies_within_the_noise_and_
     # 1 cm RMS at moderate's 2 mm) and pressed crossing strands through each other: the model rejected
     # the fit and closed-loop episodes ended "lost" (docs/log/2026-12-06.md, session 2).
     rng, fit = np.random.default_rng(5), ChainFit()
-    sim, fitted, kept = RopeSim(), 0, 0
-    while fitted < 8:
+    sim, fitted, kept, same = RopeSim(), 0, 0, 0
+    while fitted < 20:
         before = sim.state()
         if not sim.apply(sample_curve(rng)).ok:
             sim.set_state(before)
@@ -179,8 +179,65 @@ def test_the_fit_of_a_crossed_rope_seen_through_noise_lies_within_the_noise_and_
         seen = points + rng.normal(0.0, 0.002, size=points.shape)
         first, rest = fit.rest_configuration(seen)
         assert first.residual_m < 0.0035  # about the noise itself (3.5 mm per point), not ten links of it
-        assert observed_p_data(first.points) == observed_p_data(points)
+        same += observed_p_data(first.points) == observed_p_data(points)
         assert rest is not None  # the model takes it (letting it rest may still slide a strand)
         kept += rest[2] == observed_p_data(points)
         fitted += 1
-    assert kept >= 5  # 16-17 of 20 in a longer run, with or without the noise
+    # of these 20: 19 fits in the rope's state, 16 still there at rest (19 and 17 before the fit chose
+    # between hinge branches, when one fit lay 4.7 mm from the points); 34 of 40 at rest in a longer run
+    assert same >= 18 and kept >= 15
+
+
+def test_a_fit_near_the_expected_configuration_is_that_configuration() -> None:
+    # The points do not show the chain's roll about itself; the model's rope is not the same rope at
+    # another roll (its hinges have limits per axis), and a curve from the least-bent roll ended in
+    # another state than from the true one for about two curves in three (docs/log/2026-12-06.md,
+    # session 5). Fitted near the configuration expected, the fit is the configuration, bends of more
+    # than 90 degrees at a joint included (two hinge pairs give one direction there).
+    sim, fit, rng = RopeSim(), ChainFit(), np.random.default_rng(3)
+    hinges = fit._hinge_adr
+    tried, beyond = 0, 0
+    while tried < 6:
+        before = sim.state()
+        if not sim.apply(sample_curve(rng)).ok:
+            sim.set_state(before)
+            continue
+        q, points = sim.state(), sim.link_points()
+        tried += 1
+        beyond += bool(np.any(np.abs(q[hinges]) > np.pi / 2))
+        result = fit.fit(points, like=q)
+        np.testing.assert_allclose(result.points, points, atol=1e-7)
+        np.testing.assert_allclose(result.q[hinges], q[hinges], atol=1e-4)
+        assert abs(float(result.q[3:7] @ q[3:7])) > 1 - 1e-8  # the middle link's orientation
+    assert beyond >= 1  # the test met a joint bent past 90 degrees
+
+
+def test_a_straight_rope_is_fitted_at_the_roll_it_was_laid_out_with() -> None:
+    sim, fit = RopeSim(), ChainFit()
+    q = sim.state()
+    assert abs(float(fit.fit(sim.link_points(), like=q).q[3:7] @ q[3:7])) > 1 - 1e-12
+    with pytest.raises(ValueError, match="expected configuration"):
+        fit.fit(sim.link_points(), like=q[:10])
+
+
+def test_the_chooser_sends_a_curve_that_reaches_the_next_state_in_the_model_and_replays() -> None:
+    from twisted.model.registry import load_model
+    from twisted.model.sampler import ModelCurves
+    from twisted.world.choose import EnsembleChooser, Rope
+
+    sim = RopeSim()
+    start = Rope(sim.state(), sim.link_points(), sim.p_data())
+    assert sim.apply(Curve(2, 0.0308, 0.4662, 0.0664)).ok
+    target = sim.p_data()
+    assert target.cross == 1
+    sampler = ModelCurves(load_model())
+    choices = [
+        EnsembleChooser(sampler, LEVELS["moderate"], 16, 3, seed=1).choose(start, target, 0) for _ in "ab"
+    ]
+    a, b = choices
+    assert a is not None and b is not None
+    assert a.curve == b.curve and a.score == b.score  # one seed, one choice
+    assert 1 <= a.reaching <= 32 and 0 <= a.score <= 3
+    sim.set_state(start.q)
+    assert sim.apply(a.curve).ok and sim.p_data() == target
+    np.testing.assert_array_equal(sim.state(), a.q)

@@ -48,11 +48,12 @@ FIT_IN_GOAL = "the fit is in the goal"
 @dataclass(frozen=True)
 class PlanStep:
     """One node of a low-level plan: the action that leads to it (a curve as ``(link, z, x, y)``, None for
-    a cinch), and the state and link points the model says it ends in."""
+    a cinch), and the state, link points and configuration the model says it ends in."""
 
     curve: tuple[int, float, float, float] | None
     p_data: PData
     points: FloatArray
+    q: FloatArray
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,7 @@ def plan_of_run(store: Any, run_id: int) -> Plan:
     except NoPlanError as exc:
         raise PlanInputError(str(exc)) from None
     steps = tuple(
-        PlanStep(None if node.action == "cinch" else node.curve, node.p_data, node.points)
+        PlanStep(None if node.action == "cinch" else node.curve, node.p_data, node.points, node.q)
         for node in path[1:]
     )
     return Plan(run_id, path[0].q, steps)
@@ -136,17 +137,47 @@ class ModelPlanner:
         assert result.run_id is not None  # a started search has its run
         return int(result.run_id), bool(result.solved)
 
-    def replan(self, points: FloatArray, seed: int, timeout_s: float) -> Replan:
-        """Fit the model's chain to observed ``points``, let it rest in the model, store it as a
-        configuration and search from there."""
-        from twisted.store.queries import add_configuration
+    def _fitter(self) -> Any:
         from twisted.world import ChainFit
 
-        started = time.perf_counter()
         if self._fit is None:
             self._fit = ChainFit()
+        return self._fit
+
+    def fit_rope(self, points: FloatArray, like: FloatArray | None) -> Any:
+        """The observed ``points`` as a rope of the model at rest (:class:`twisted.world.choose.Rope`),
+        fitted near ``like`` (the model's expectation; None: the least-bent roll); None when the model
+        rejects the fit."""
+        from twisted.world.choose import Rope
+
         try:
-            fit, rest = self._fit.rest_configuration(points)
+            _, rest = self._fitter().rest_configuration(points, like)
+        except ValueError:
+            return None
+        return None if rest is None else Rope(*rest)
+
+    def chooser(self, settings: EpisodeSettings, seed: int) -> Any:
+        """The :class:`twisted.world.choose.EnsembleChooser` of ``settings`` (None when ``choose`` is 0),
+        sampling the planner's model."""
+        if not settings.choose:
+            return None
+        from twisted.world.choose import EnsembleChooser
+
+        sampler, _ = self._resources.sampler(self.store, self.options.planner, self.model_id)
+        if sampler is None:
+            raise PlanInputError("choosing curves needs the inverse model (planner twisted)")
+        return EnsembleChooser(sampler, settings.imagine, settings.choose, settings.ensemble, seed)
+
+    def replan(
+        self, points: FloatArray, seed: int, timeout_s: float, like: FloatArray | None = None
+    ) -> Replan:
+        """Fit the model's chain to observed ``points`` (near ``like``, the model's expectation of them,
+        when given), let it rest in the model, store it as a configuration and search from there."""
+        from twisted.store.queries import add_configuration
+
+        started = time.perf_counter()
+        try:
+            fit, rest = self._fitter().rest_configuration(points, like)
         except ValueError as exc:
             return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}")
         if rest is None:
@@ -177,6 +208,16 @@ class EpisodeSettings:
     timeout_s: float
     max_actions: int = DEFAULT_MAX_ACTIONS
     drift_m: float = DEFAULT_DRIFT_M
+    # closed loop: choose each curve among this many of the model's (0: send the plan's own curves), by
+    # ``ensemble`` ropes imagined from the ranges of ``imagine`` (twisted.world.choose)
+    choose: int = 0
+    ensemble: int = 8
+    imagine: Any = None
+
+    def choice_parameters(self) -> dict[str, Any]:
+        """What an episode stores of the choice, to resume it as it was."""
+        imagine = None if self.imagine is None else self.imagine.to_dict()
+        return {"choose": self.choose, "ensemble": self.ensemble, "imagine": imagine}
 
 
 @dataclass
@@ -193,6 +234,9 @@ class EpisodeState:
     replan_runs: list[int] = field(default_factory=list)
     pulls: int = 0
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
+    # the model's configuration of what the world's rope should now be (the last action's outcome in the
+    # model); each observation is fitted near it (twisted.world.fit.ChainFit.fit). None: not known
+    expected_q: FloatArray | None = None
 
 
 @dataclass
@@ -242,8 +286,9 @@ def ties_goal(goal: Goal, p_data: PData) -> bool:
     return goal.tightened_ties(identify(p_data).name)
 
 
-def _drift(points: FloatArray, step: PlanStep) -> float:
-    return float(np.sqrt(np.mean(np.sum((points - step.points) ** 2, axis=1))))
+def _drift(points: FloatArray, expected: FloatArray) -> float:
+    """RMS distance of observed link points from the ones expected."""
+    return float(np.sqrt(np.mean(np.sum((points - expected) ** 2, axis=1))))
 
 
 class Episode:
@@ -265,6 +310,9 @@ class Episode:
         self.progress = progress or (lambda line: None)
         self._clock = 0.0
         self._started = time.perf_counter()
+        self._chooser: Any = None
+        if settings.closed_loop and settings.choose:
+            self._chooser = planner.chooser(settings, int(getattr(planner.options, "seed", 0)))
 
     # ---- bookkeeping ----------------------------------------------------------------------------------
 
@@ -295,7 +343,7 @@ class Episode:
     def begin(self, plan: Plan) -> EpisodeState:
         """Lay the world's rope out as the plan's root and observe it (the episode's first step)."""
         seen = self.world.reset(plan.root_q)
-        state = EpisodeState(seen.points, plan, 0)
+        state = EpisodeState(seen.points, plan, 0, expected_q=plan.root_q)
         self._record(
             state, "reset", **self._observation(seen.points), world_checkpoint=self.world.checkpoint()
         )
@@ -369,12 +417,14 @@ class Episode:
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        replanned = self.planner.replan(state.points, seed, remaining_s)
+        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q)
         state.replans += 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
             state.replan_runs.append(replanned.run_id)
         state.plan, state.position = replanned.plan, 0
+        if replanned.plan is not None:
+            state.expected_q = replanned.plan.root_q  # the fit at rest the plan starts from
         self.progress(
             f"replan {state.replans}: run {replanned.run_id}, "
             f"{'solved' if replanned.plan else replanned.reason or 'not solved'} "
@@ -400,31 +450,66 @@ class Episode:
 
         assert state.plan is not None
         step = state.plan.steps[state.position]
-        seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
+        curve: Any = None if step.curve is None else Curve(*step.curve)
+        expected, expected_points = step.p_data, step.points
+        chosen = self._choose(state) if curve is not None and self._chooser is not None else None
+        if chosen is not None:
+            choice, index = chosen
+            curve, expected, expected_points = choice.curve, state.plan.steps[index].p_data, choice.points
+            state.position, state.expected_q = index + 1, choice.q
+        else:
+            state.position += 1
+            state.expected_q = step.q
+        seen = self.world.cinch() if curve is None else self.world.execute(curve)
         state.actions += 1
-        state.position += 1
         state.points = seen.points
-        drift = _drift(seen.points, step)
+        drift = _drift(seen.points, expected_points)
         observed = _observed(seen.points)
-        off_plan = seen.fault is not None or observed != step.p_data or drift > self.settings.drift_m
+        # a chosen curve's next one is chosen from the next observation's own fit: only a state off the
+        # plan (or a fault) calls for a replan, however far the rope lies from the model's outcome
+        drifted = drift > self.settings.drift_m and chosen is None
+        off_plan = seen.fault is not None or observed != expected or drifted
         if off_plan and self.settings.closed_loop:
             state.plan = None
+        sent = None if curve is None else (int(curve.link), curve.z_max_m, curve.x_m, curve.y_m)
         self.progress(
-            f"action {state.actions}: {'cinch' if step.curve is None else 'curve'} -> "
-            f"{observed.key if observed else '?'} (plan {step.p_data.key}, drift {drift:.3f} m)"
+            f"action {state.actions}: {'cinch' if curve is None else 'curve'}"
+            f"{' (chosen)' if chosen is not None else ''} -> "
+            f"{observed.key if observed else '?'} (plan {expected.key}, drift {drift:.3f} m)"
             + (" off plan" if off_plan else "")
         )
         self._record(
             state,
-            "curve" if step.curve is not None else "cinch",
-            curve=step.curve,
+            "curve" if curve is not None else "cinch",
+            curve=sent,
             **self._observation(seen.points),
-            expected_key=step.p_data.key,
+            expected_key=expected.key,
             drift_m=drift,
             fault=seen.fault,
             world_checkpoint=self.world.checkpoint(),
             **({"plan_run_id": None, "plan_step": None} if state.plan is None else {}),
         )
+
+    def _choose(self, state: EpisodeState) -> tuple[Any, int] | None:
+        """The chooser's curve from the observed rope to the plan's next state, and that state's step;
+        None (send the plan's own step) when the fit is refused, the plan's next state is a cinch away or
+        no model curve reaches it. Its time counts as planning."""
+        assert state.plan is not None
+        started = time.perf_counter()
+        try:
+            rope = self.planner.fit_rope(state.points, state.expected_q)
+            if rope is None:
+                return None
+            steps = state.plan.steps
+            index = next(
+                (j for j in range(state.position, len(steps)) if steps[j].p_data != rope.p_data), None
+            )
+            if index is None or any(steps[j].curve is None for j in range(state.position, index + 1)):
+                return None
+            choice = self._chooser.choose(rope, steps[index].p_data, state.actions)
+            return None if choice is None else (choice, index)
+        finally:
+            state.planning_s += time.perf_counter() - started
 
 
 def run_episode(
@@ -443,7 +528,12 @@ def run_episode(
     from twisted.world import SimWorld
 
     world = SimWorld(level, seed)
-    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
+    parameters = {
+        "drift_m": settings.drift_m,
+        "workers": planner.workers,
+        "level": level.to_dict(),
+        **settings.choice_parameters(),
+    }
     run_id = create_episode(
         store,
         parameters,

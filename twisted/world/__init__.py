@@ -10,7 +10,7 @@ planner's model.
 from twisted.world.fit import ChainFit, Fit, observed_p_data
 from twisted.world.levels import LEVELS, Level, LevelError, check_level, parse_level
 from twisted.world.protocol import Observation, PullVerdict, World
-from twisted.world.sim_world import SimWorld, WorldPhysics, draw_physics
+from twisted.world.sim_world import SimWorld, WorldPhysics, draw_physics, noisy_curve
 
 __all__ = [
     "LEVELS",
@@ -25,6 +25,7 @@ __all__ = [
     "WorldPhysics",
     "check_level",
     "draw_physics",
+    "noisy_curve",
     "observed_p_data",
     "parse_level",
 ]

@@ -22,6 +22,7 @@ the middle link's pose and every hinge angle, towards the observed points: about
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -72,10 +73,26 @@ def _ry(a: float) -> FloatArray:
 
 
 def _hinges(parent: FloatArray, direction: FloatArray, limit: float) -> tuple[float, float, FloatArray]:
-    """Yaw and pitch turning ``parent``'s x axis onto ``direction`` (clipped to +-limit); the child frame."""
+    """Yaw and pitch turning ``parent``'s x axis onto ``direction``, and the child frame.
+
+    Two hinge pairs give one direction: (yaw, pitch) with the pitch within +-90 degrees, and (yaw + 180,
+    180 - pitch), whose child frame is the first's rolled half a turn. With the model's limits beyond 90
+    degrees (a curl bends a joint that far) both can be within them; the pair within the limits is taken,
+    of two the one bending less (the smaller sum of squares), and an angle beyond its limit is clipped."""
     u = parent.T @ direction
-    yaw = float(np.clip(math.atan2(u[1], u[0]), -limit, limit))
-    pitch = float(np.clip(math.atan2(-u[2], math.hypot(u[0], u[1])), -limit, limit))
+    yaw = math.atan2(u[1], u[0])
+    pitch = math.atan2(-u[2], math.hypot(u[0], u[1]))
+    other_yaw = yaw - math.pi if yaw > 0.0 else yaw + math.pi
+    other_pitch = (math.pi if pitch >= 0.0 else -math.pi) - pitch
+
+    def cost(a: float, b: float) -> tuple[float, float]:
+        beyond = max(abs(a) - limit, 0.0) + max(abs(b) - limit, 0.0)
+        return beyond, a * a + b * b
+
+    if cost(other_yaw, other_pitch) < cost(yaw, pitch):
+        yaw, pitch = other_yaw, other_pitch
+    yaw = float(np.clip(yaw, -limit, limit))
+    pitch = float(np.clip(pitch, -limit, limit))
     return yaw, pitch, parent @ _rz(yaw) @ _ry(pitch)
 
 
@@ -172,13 +189,38 @@ class ChainFit:
                 break
         return qpos
 
-    def fit(self, points: npt.ArrayLike) -> Fit:
-        """The configuration whose link points come closest to ``points`` (N_POINTS x 3, metres)."""
+    def _roll_score(self, like: npt.ArrayLike | None) -> Callable[[FloatArray, float], float]:
+        """What a roll of the middle link is chosen by: the bending energy, or (``like`` given) the
+        squared distance of the hinge angles and the middle link's orientation from ``like``'s."""
+        if like is None:
+            return lambda qpos, energy: energy
+        q = np.asarray(like, dtype=np.float64)
+        if q.shape != (self.sim.state_size,) or not np.all(np.isfinite(q)):
+            raise ValueError(f"an expected configuration holds {self.sim.state_size} finite values")
+        hinges, quat = q[self._hinge_adr], q[3:7] / np.linalg.norm(q[3:7])
+
+        def distance(qpos: FloatArray, energy: float) -> float:
+            # the hinge angles' squared distance, and the middle link's turn from ``like``'s (the one
+            # that tells rolls apart where the hinges cannot: a straight rope)
+            turn = 2.0 * math.acos(min(abs(float(qpos[3:7] @ quat)) / float(np.linalg.norm(qpos[3:7])), 1.0))
+            return float(np.sum((qpos[self._hinge_adr] - hinges) ** 2)) + turn * turn
+
+        return distance
+
+    def fit(self, points: npt.ArrayLike, like: npt.ArrayLike | None = None) -> Fit:
+        """The configuration whose link points come closest to ``points`` (N_POINTS x 3, metres).
+
+        The points do not show how the chain is rolled about itself (the middle link's roll, which the
+        hinge angles then follow). Without ``like`` the roll is the one that bends the chain least; with
+        ``like``, a configuration the rope is expected to be near (the model's prediction of the last
+        action's outcome), it is the roll whose hinge angles lie closest to ``like``'s: the twist a curve
+        leaves in the rope is then carried from one observation to the next (docs/DESIGN.md 15.4)."""
         p = np.asarray(points, dtype=np.float64)
         if p.shape != (N_POINTS, 3) or not np.all(np.isfinite(p)):
             raise ValueError(f"observed points must be {N_POINTS} x 3 finite values, got shape {p.shape}")
         if np.min(np.linalg.norm(np.diff(p, axis=0), axis=1)) < 1e-9:
             raise ValueError("observed points: two neighbouring link points coincide")
+        score = self._roll_score(like)
         observed = p
         # a point lower than the model's resting height lies on the table: the model's rope rests with
         # its centreline one radius up (less a contact's sub-millimetre give), and a chain fitted lower
@@ -186,13 +228,12 @@ class ChainFit:
         p = p.copy()
         p[:, 2] = np.maximum(p[:, 2], self.sim.params.link_radius_m - TABLE_GIVE_M)
         rolls = np.linspace(-math.pi, math.pi, ROLL_GRID, endpoint=False)
-        candidates = [self._qpos(p, float(r)) for r in rolls]
-        best = int(np.argmin([energy for _, energy in candidates]))
-        # refine around the best grid roll (golden-section on the energy)
+        best = int(np.argmin([score(*self._qpos(p, float(r))) for r in rolls]))
+        # refine around the best grid roll (golden-section on the score)
         lo, hi = rolls[best] - math.pi / ROLL_GRID, rolls[best] + math.pi / ROLL_GRID
         for _ in range(30):
             a, b = hi - 0.618 * (hi - lo), lo + 0.618 * (hi - lo)
-            if self._qpos(p, a)[1] < self._qpos(p, b)[1]:
+            if score(*self._qpos(p, a)) < score(*self._qpos(p, b)):
                 hi = b
             else:
                 lo = a
@@ -204,7 +245,7 @@ class ChainFit:
         return Fit(q, fitted, residual)
 
     def rest_configuration(
-        self, points: npt.ArrayLike
+        self, points: npt.ArrayLike, like: npt.ArrayLike | None = None
     ) -> tuple[Fit, tuple[FloatArray, FloatArray, PData] | None]:
         """The fit of ``points`` and its configuration at rest in the model (:meth:`at_rest`).
 
@@ -213,14 +254,14 @@ class ChainFit:
         (x1.5, x2, x3: which strand is over stays over) and fitted again, and the model lets the rope
         fall back when it rests. The fit returned is that of the points as observed."""
         p = np.asarray(points, dtype=np.float64)
-        first = self.fit(p)
+        first = self.fit(p, like)
         floor = self.sim.params.link_radius_m
         for stretch in HEIGHT_STRETCHES:
             fit = first
             if stretch != 1.0:
                 stretched = p.copy()
                 stretched[:, 2] = floor + np.maximum(p[:, 2] - floor, 0.0) * stretch
-                fit = self.fit(stretched)
+                fit = self.fit(stretched, like)
             rest = self.at_rest(fit)
             if rest is not None:
                 return first, rest
