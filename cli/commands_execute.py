@@ -36,9 +36,6 @@ def _level(text: str) -> Any:
         fail(f"--world {text}: {exc}")
 
 
-MAX_CHOOSE = 256  # curves per choice, imagined ropes per curve: each is one simulator call per action
-
-
 def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: int) -> None:
     check_workers(workers)
     if not 0.0 < drift_m <= 1.0:
@@ -89,25 +86,6 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
         ),
     ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
-    "choose": (
-        int,
-        typer.Option(
-            0,
-            "--choose",
-            help="Closed loop: send, of this many model curves toward the plan's next state, the one that "
-            "reaches it in most imagined ropes (0: the plan's own curves; docs/DESIGN.md section 15.6).",
-        ),
-    ),
-    "ensemble": (int, typer.Option(8, "--ensemble", help="With --choose: imagined ropes per curve.")),
-    "imagine": (
-        str,
-        typer.Option(
-            "moderate",
-            "--imagine",
-            help="With --choose: the level whose ranges the imagined ropes are drawn from (the planner's "
-            "guess of how far the world may be from its model; never the world's own draw).",
-        ),
-    ),
 }
 
 
@@ -122,9 +100,6 @@ class WorldRequest:
     max_actions: int
     drift_m: float
     workers: int
-    choose: int
-    ensemble: int
-    imagine: str
 
     def check(self) -> tuple[Any, Any]:
         """The level and the episode's settings; exit 2 before anything is opened when one makes no sense."""
@@ -132,22 +107,7 @@ class WorldRequest:
 
         level = _level(self.world)
         _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
-        if not 0 <= self.choose <= MAX_CHOOSE:
-            fail(
-                f"--choose {self.choose}: give 0 (the plan's curves) or a number of curves up to {MAX_CHOOSE}"
-            )
-        if not 1 <= self.ensemble <= MAX_CHOOSE:
-            fail(f"--ensemble {self.ensemble}: give a number of imagined ropes from 1 to {MAX_CHOOSE}")
-        imagine = _level(self.imagine) if self.choose else None
-        return level, EpisodeSettings(
-            self.closed_loop,
-            self.timeout_s,
-            self.max_actions,
-            self.drift_m,
-            choose=self.choose,
-            ensemble=self.ensemble,
-            imagine=imagine,
-        )
+        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
 
 
 def with_world_options(func: F) -> F:
@@ -322,13 +282,7 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
     workers = parameters.get("workers")
     if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(
-        stored.closed_loop,
-        stored.timeout_s,
-        stored.max_actions,
-        drift_m,
-        **_stored_choice(episode_id, parameters),
-    )
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():
@@ -340,27 +294,6 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
             planner.close()
     _report(result, as_json, {"resumed": True, "level": level.name, "seed": stored.world_seed})
     _exit(result, stop)
-
-
-def _stored_choice(episode_id: int, parameters: dict[str, Any]) -> dict[str, Any]:
-    """The curve choice an episode was run with (none before it was stored), checked; exit 2 otherwise."""
-    from twisted.world import Level, LevelError
-
-    choose, ensemble, imagine = (parameters.get(k) for k in ("choose", "ensemble", "imagine"))
-    if choose is None:
-        return {}
-    bad = f"--resume {episode_id}: its stored curve choice does not read back"
-    if not (isinstance(choose, int) and 0 <= choose <= MAX_CHOOSE):
-        fail(f"{bad} (choose {choose!r:.40})")
-    if not (isinstance(ensemble, int) and 1 <= ensemble <= MAX_CHOOSE):
-        fail(f"{bad} (ensemble {ensemble!r:.40})")
-    if not choose:
-        return {"choose": 0, "ensemble": ensemble}
-    try:
-        level = Level.from_dict(imagine)  # type: ignore[arg-type]
-    except LevelError as exc:
-        fail(f"{bad}: {exc}")
-    return {"choose": choose, "ensemble": ensemble, "imagine": level}
 
 
 def _episode_parameters(store: Any, episode_id: int) -> dict[str, Any]:

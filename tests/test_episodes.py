@@ -264,11 +264,6 @@ def load_levels(store: Any) -> list[tuple[str, str]]:
         ["--loops", "sideways"],
         ["--knot", "granny-knot-of-doom"],
         ["--drift", "-1"],
-        ["--choose", "-1"],
-        ["--choose", "100000"],
-        ["--choose", "8", "--ensemble", "0"],
-        ["--choose", "8", "--imagine", "hurricane"],
-        ["--choose", "8", "--imagine", "none,friction=-1:1"],
     ],
 )
 def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path, args: list[str]) -> None:

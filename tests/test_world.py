@@ -218,26 +218,3 @@ def test_a_straight_rope_is_fitted_at_the_roll_it_was_laid_out_with() -> None:
     assert abs(float(fit.fit(sim.link_points(), like=q).q[3:7] @ q[3:7])) > 1 - 1e-12
     with pytest.raises(ValueError, match="expected configuration"):
         fit.fit(sim.link_points(), like=q[:10])
-
-
-def test_the_chooser_sends_a_curve_that_reaches_the_next_state_in_the_model_and_replays() -> None:
-    from twisted.model.registry import load_model
-    from twisted.model.sampler import ModelCurves
-    from twisted.world.choose import EnsembleChooser, Rope
-
-    sim = RopeSim()
-    start = Rope(sim.state(), sim.link_points(), sim.p_data())
-    assert sim.apply(Curve(2, 0.0308, 0.4662, 0.0664)).ok
-    target = sim.p_data()
-    assert target.cross == 1
-    sampler = ModelCurves(load_model())
-    choices = [
-        EnsembleChooser(sampler, LEVELS["moderate"], 16, 3, seed=1).choose(start, target, 0) for _ in "ab"
-    ]
-    a, b = choices
-    assert a is not None and b is not None
-    assert a.curve == b.curve and a.score == b.score  # one seed, one choice
-    assert 1 <= a.reaching <= 32 and 0 <= a.score <= 3
-    sim.set_state(start.q)
-    assert sim.apply(a.curve).ok and sim.p_data() == target
-    np.testing.assert_array_equal(sim.state(), a.q)

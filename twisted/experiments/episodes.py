@@ -137,47 +137,19 @@ class ModelPlanner:
         assert result.run_id is not None  # a started search has its run
         return int(result.run_id), bool(result.solved)
 
-    def _fitter(self) -> Any:
-        from twisted.world import ChainFit
-
-        if self._fit is None:
-            self._fit = ChainFit()
-        return self._fit
-
-    def fit_rope(self, points: FloatArray, like: FloatArray | None) -> Any:
-        """The observed ``points`` as a rope of the model at rest (:class:`twisted.world.choose.Rope`),
-        fitted near ``like`` (the model's expectation; None: the least-bent roll); None when the model
-        rejects the fit."""
-        from twisted.world.choose import Rope
-
-        try:
-            _, rest = self._fitter().rest_configuration(points, like)
-        except ValueError:
-            return None
-        return None if rest is None else Rope(*rest)
-
-    def chooser(self, settings: EpisodeSettings, seed: int) -> Any:
-        """The :class:`twisted.world.choose.EnsembleChooser` of ``settings`` (None when ``choose`` is 0),
-        sampling the planner's model."""
-        if not settings.choose:
-            return None
-        from twisted.world.choose import EnsembleChooser
-
-        sampler, _ = self._resources.sampler(self.store, self.options.planner, self.model_id)
-        if sampler is None:
-            raise PlanInputError("choosing curves needs the inverse model (planner twisted)")
-        return EnsembleChooser(sampler, settings.imagine, settings.choose, settings.ensemble, seed)
-
     def replan(
         self, points: FloatArray, seed: int, timeout_s: float, like: FloatArray | None = None
     ) -> Replan:
         """Fit the model's chain to observed ``points`` (near ``like``, the model's expectation of them,
         when given), let it rest in the model, store it as a configuration and search from there."""
         from twisted.store.queries import add_configuration
+        from twisted.world import ChainFit
 
         started = time.perf_counter()
+        if self._fit is None:
+            self._fit = ChainFit()
         try:
-            fit, rest = self._fitter().rest_configuration(points, like)
+            fit, rest = self._fit.rest_configuration(points, like)
         except ValueError as exc:
             return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}")
         if rest is None:
@@ -208,16 +180,6 @@ class EpisodeSettings:
     timeout_s: float
     max_actions: int = DEFAULT_MAX_ACTIONS
     drift_m: float = DEFAULT_DRIFT_M
-    # closed loop: choose each curve among this many of the model's (0: send the plan's own curves), by
-    # ``ensemble`` ropes imagined from the ranges of ``imagine`` (twisted.world.choose)
-    choose: int = 0
-    ensemble: int = 8
-    imagine: Any = None
-
-    def choice_parameters(self) -> dict[str, Any]:
-        """What an episode stores of the choice, to resume it as it was."""
-        imagine = None if self.imagine is None else self.imagine.to_dict()
-        return {"choose": self.choose, "ensemble": self.ensemble, "imagine": imagine}
 
 
 @dataclass
@@ -286,9 +248,8 @@ def ties_goal(goal: Goal, p_data: PData) -> bool:
     return goal.tightened_ties(identify(p_data).name)
 
 
-def _drift(points: FloatArray, expected: FloatArray) -> float:
-    """RMS distance of observed link points from the ones expected."""
-    return float(np.sqrt(np.mean(np.sum((points - expected) ** 2, axis=1))))
+def _drift(points: FloatArray, step: PlanStep) -> float:
+    return float(np.sqrt(np.mean(np.sum((points - step.points) ** 2, axis=1))))
 
 
 class Episode:
@@ -310,9 +271,6 @@ class Episode:
         self.progress = progress or (lambda line: None)
         self._clock = 0.0
         self._started = time.perf_counter()
-        self._chooser: Any = None
-        if settings.closed_loop and settings.choose:
-            self._chooser = planner.chooser(settings, int(getattr(planner.options, "seed", 0)))
 
     # ---- bookkeeping ----------------------------------------------------------------------------------
 
@@ -450,66 +408,32 @@ class Episode:
 
         assert state.plan is not None
         step = state.plan.steps[state.position]
-        curve: Any = None if step.curve is None else Curve(*step.curve)
-        expected, expected_points = step.p_data, step.points
-        chosen = self._choose(state) if curve is not None and self._chooser is not None else None
-        if chosen is not None:
-            choice, index = chosen
-            curve, expected, expected_points = choice.curve, state.plan.steps[index].p_data, choice.points
-            state.position, state.expected_q = index + 1, choice.q
-        else:
-            state.position += 1
-            state.expected_q = step.q
-        seen = self.world.cinch() if curve is None else self.world.execute(curve)
+        seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
         state.actions += 1
+        state.position += 1
+        state.expected_q = step.q
         state.points = seen.points
-        drift = _drift(seen.points, expected_points)
+        drift = _drift(seen.points, step)
         observed = _observed(seen.points)
-        # a chosen curve's next one is chosen from the next observation's own fit: only a state off the
-        # plan (or a fault) calls for a replan, however far the rope lies from the model's outcome
-        drifted = drift > self.settings.drift_m and chosen is None
-        off_plan = seen.fault is not None or observed != expected or drifted
+        off_plan = seen.fault is not None or observed != step.p_data or drift > self.settings.drift_m
         if off_plan and self.settings.closed_loop:
             state.plan = None
-        sent = None if curve is None else (int(curve.link), curve.z_max_m, curve.x_m, curve.y_m)
         self.progress(
-            f"action {state.actions}: {'cinch' if curve is None else 'curve'}"
-            f"{' (chosen)' if chosen is not None else ''} -> "
-            f"{observed.key if observed else '?'} (plan {expected.key}, drift {drift:.3f} m)"
+            f"action {state.actions}: {'cinch' if step.curve is None else 'curve'} -> "
+            f"{observed.key if observed else '?'} (plan {step.p_data.key}, drift {drift:.3f} m)"
             + (" off plan" if off_plan else "")
         )
         self._record(
             state,
-            "curve" if curve is not None else "cinch",
-            curve=sent,
+            "curve" if step.curve is not None else "cinch",
+            curve=step.curve,
             **self._observation(seen.points),
-            expected_key=expected.key,
+            expected_key=step.p_data.key,
             drift_m=drift,
             fault=seen.fault,
             world_checkpoint=self.world.checkpoint(),
             **({"plan_run_id": None, "plan_step": None} if state.plan is None else {}),
         )
-
-    def _choose(self, state: EpisodeState) -> tuple[Any, int] | None:
-        """The chooser's curve from the observed rope to the plan's next state, and that state's step;
-        None (send the plan's own step) when the fit is refused, the plan's next state is a cinch away or
-        no model curve reaches it. Its time counts as planning."""
-        assert state.plan is not None
-        started = time.perf_counter()
-        try:
-            rope = self.planner.fit_rope(state.points, state.expected_q)
-            if rope is None:
-                return None
-            steps = state.plan.steps
-            index = next(
-                (j for j in range(state.position, len(steps)) if steps[j].p_data != rope.p_data), None
-            )
-            if index is None or any(steps[j].curve is None for j in range(state.position, index + 1)):
-                return None
-            choice = self._chooser.choose(rope, steps[index].p_data, state.actions)
-            return None if choice is None else (choice, index)
-        finally:
-            state.planning_s += time.perf_counter() - started
 
 
 def run_episode(
@@ -528,12 +452,7 @@ def run_episode(
     from twisted.world import SimWorld
 
     world = SimWorld(level, seed)
-    parameters = {
-        "drift_m": settings.drift_m,
-        "workers": planner.workers,
-        "level": level.to_dict(),
-        **settings.choice_parameters(),
-    }
+    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
     run_id = create_episode(
         store,
         parameters,
@@ -584,4 +503,6 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
     )
+    if plan is not None:  # the model's expectation of the rope: the node the plan last reached
+        state.expected_q = plan.steps[position - 1].q if position else plan.root_q
     return state, dict(last_seen.world_checkpoint)

@@ -10,7 +10,7 @@ planner's model.
 from twisted.world.fit import ChainFit, Fit, observed_p_data
 from twisted.world.levels import LEVELS, Level, LevelError, check_level, parse_level
 from twisted.world.protocol import Observation, PullVerdict, World
-from twisted.world.sim_world import SimWorld, WorldPhysics, draw_physics, noisy_curve
+from twisted.world.sim_world import SimWorld, WorldPhysics, draw_physics
 
 __all__ = [
     "LEVELS",
@@ -25,7 +25,6 @@ __all__ = [
     "WorldPhysics",
     "check_level",
     "draw_physics",
-    "noisy_curve",
     "observed_p_data",
     "parse_level",
 ]

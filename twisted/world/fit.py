@@ -5,9 +5,11 @@ chain to the points (docs/DESIGN.md section 15.4): link ``i`` runs from point ``
 its direction is known; the middle link carries the free joint (its centre is the mid-point of its two
 points) and every other link hangs off its neighbour towards the middle by a yaw about the parent's z
 and then a pitch about the new y (the order of the hinges in the MJCF, 2.1). Each hinge pair is read
-from the child's direction in the parent's frame. The roll of the middle link about its own axis is not
-seen in the points; the fit takes the roll whose hinge angles bend the chain least (the least elastic
-energy), which for a rope lying on a table is the horizontal one. Points lower than the model's link
+from the child's direction in the parent's frame; of the two pairs that give a direction bent past 90
+degrees, the one within the joint limits. The roll of the middle link about its own axis is not seen in
+the points; the fit takes the roll nearest a configuration the rope is expected to be near (``like``: the
+model's outcome of the last action), else the roll whose hinge angles bend the chain least (the least
+elastic energy). Points lower than the model's link
 radius (less 2 mm) are raised to it (they lie on the table). Joint angles are clipped to the
 model's limits, the velocity is zero (a rope at rest), and the fit's residual is the RMS distance between
 the observed points and the points of the fitted configuration.
@@ -197,6 +199,8 @@ class ChainFit:
         q = np.asarray(like, dtype=np.float64)
         if q.shape != (self.sim.state_size,) or not np.all(np.isfinite(q)):
             raise ValueError(f"an expected configuration holds {self.sim.state_size} finite values")
+        if not 0.5 < float(np.linalg.norm(q[3:7])) < 2.0:
+            raise ValueError("an expected configuration's middle link has no orientation (quaternion)")
         hinges, quat = q[self._hinge_adr], q[3:7] / np.linalg.norm(q[3:7])
 
         def distance(qpos: FloatArray, energy: float) -> float:

@@ -152,21 +152,16 @@ class SimWorld:
         return self._sim.link_points()
 
     def _noisy(self, curve: Curve) -> Curve:
-        """The curve the gripper carries out (:func:`noisy_curve` with the world's action generator)."""
-        return noisy_curve(curve, self.level, self._actions)
+        """The curve the gripper carries out: maybe a neighbour's link, the target and the lift off by noise.
 
-
-def noisy_curve(curve: Curve, level: Level, rng: np.random.Generator) -> Curve:
-    """The curve a gripper of ``level`` carries out: maybe a neighbour's link, the target and the lift
-    off by noise.
-
-    The draws are made whatever the level (zero noise draws zeros), so that one seed and one list of
-    actions give one stream of noise at every level."""
-    off, side = rng.random() < level.grasp_off_by_one_p, rng.random() < 0.5
-    dx, dy = rng.normal(0.0, 1.0, size=2) * level.carry_noise_m
-    dz = float(rng.normal(0.0, 1.0)) * level.lift_noise_m
-    link = curve.link
-    if off:
-        step = 1 if side else -1
-        link = link + step if 0 <= link + step < N_LINKS else link - step
-    return Curve(link, max(curve.z_max_m + dz, 0.0), curve.x_m + float(dx), curve.y_m + float(dy))
+        The draws are made whatever the level (zero noise draws zeros), so that one seed and one list of
+        actions give one stream of noise at every level."""
+        level, rng = self.level, self._actions
+        off, side = rng.random() < level.grasp_off_by_one_p, rng.random() < 0.5
+        dx, dy = rng.normal(0.0, 1.0, size=2) * level.carry_noise_m
+        dz = float(rng.normal(0.0, 1.0)) * level.lift_noise_m
+        link = curve.link
+        if off:
+            step = 1 if side else -1
+            link = link + step if 0 <= link + step < N_LINKS else link - step
+        return Curve(link, max(curve.z_max_m + dz, 0.0), curve.x_m + float(dx), curve.y_m + float(dy))
