@@ -36,7 +36,9 @@ def _level(text: str) -> Any:
         fail(f"--world {text}: {exc}")
 
 
-def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: int) -> None:
+def _check_budget(
+    timeout_s: float, max_actions: int, drift_m: float, workers: int, replan_s: float | None
+) -> None:
     check_workers(workers)
     if not 0.0 < drift_m <= 1.0:
         fail(f"--drift {drift_m:g}: give a distance in metres in (0, 1]")
@@ -44,6 +46,8 @@ def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: i
         fail(f"--timeout {timeout_s:g}: give a positive number of seconds")
     if max_actions < 1:
         fail(f"--max-actions {max_actions}: give at least 1")
+    if replan_s is not None and not 0.0 < replan_s <= timeout_s:
+        fail(f"--replan-timeout {replan_s:g}: give seconds in (0, --timeout {timeout_s:g}]")
 
 
 # The options `execute` and `tie` share: name -> (type, Typer option).
@@ -85,6 +89,15 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
             help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
         ),
     ),
+    "replan_s": (
+        float | None,
+        typer.Option(
+            None,
+            "--replan-timeout",
+            help="Closed loop: a replan searches at most this long (s), twice as long after each replan "
+            "that found no plan from the same observation (default: the rest of the budget).",
+        ),
+    ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
 }
 
@@ -99,6 +112,7 @@ class WorldRequest:
     timeout_s: float
     max_actions: int
     drift_m: float
+    replan_s: float | None
     workers: int
 
     def check(self) -> tuple[Any, Any]:
@@ -106,8 +120,11 @@ class WorldRequest:
         from twisted.experiments.episodes import EpisodeSettings
 
         level = _level(self.world)
-        _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
-        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
+        _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers, self.replan_s)
+        settings = EpisodeSettings(
+            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.replan_s
+        )
+        return level, settings
 
 
 def with_world_options(func: F) -> F:
@@ -204,7 +221,7 @@ def execute_command(
         ]
         if run_id is not None or given:
             dropped = ([f"RUN_ID {run_id}"] if run_id is not None else []) + [
-                "--" + n.removesuffix("_s").removesuffix("_m").replace("_", "-") for n in given
+                _WORLD_OPTIONS[n][1].param_decls[0].split("/")[0] for n in given
             ]
             fail(f"--resume {resume} continues an episode as it was asked: drop {', '.join(dropped)}")
         _resume(ctx, resume, as_json)
@@ -280,9 +297,16 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
     parameters = _episode_parameters(store, episode_id)
     drift_m = parameters.get("drift_m")
     workers = parameters.get("workers")
-    if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
+    replan_s = parameters.get("replan_s")  # absent in episodes stored before it existed: None
+    if (
+        not isinstance(drift_m, float)
+        or not 0 < drift_m <= 1
+        or not isinstance(workers, int)
+        or workers < 1
+        or not (replan_s is None or (isinstance(replan_s, float) and 0 < replan_s < float("inf")))
+    ):
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, replan_s)
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():
