@@ -36,9 +36,7 @@ def _level(text: str) -> Any:
         fail(f"--world {text}: {exc}")
 
 
-def _check_budget(
-    timeout_s: float, max_actions: int, drift_m: float, workers: int, replan_s: float | None
-) -> None:
+def _check_budget(timeout_s: float, max_actions: int, drift_m: float, workers: int) -> None:
     check_workers(workers)
     if not 0.0 < drift_m <= 1.0:
         fail(f"--drift {drift_m:g}: give a distance in metres in (0, 1]")
@@ -46,8 +44,6 @@ def _check_budget(
         fail(f"--timeout {timeout_s:g}: give a positive number of seconds")
     if max_actions < 1:
         fail(f"--max-actions {max_actions}: give at least 1")
-    if replan_s is not None and not 0.0 < replan_s <= timeout_s:
-        fail(f"--replan-timeout {replan_s:g}: give seconds in (0, --timeout {timeout_s:g}]")
 
 
 # The options `execute` and `tie` share: name -> (type, Typer option).
@@ -89,15 +85,6 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
             help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
         ),
     ),
-    "replan_s": (
-        float | None,
-        typer.Option(
-            None,
-            "--replan-timeout",
-            help="Closed loop: a replan searches at most this long (s), twice as long after each replan "
-            "that found no plan from the same observation (default: the rest of the budget).",
-        ),
-    ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
 }
 
@@ -112,7 +99,6 @@ class WorldRequest:
     timeout_s: float
     max_actions: int
     drift_m: float
-    replan_s: float | None
     workers: int
 
     def check(self) -> tuple[Any, Any]:
@@ -120,11 +106,8 @@ class WorldRequest:
         from twisted.experiments.episodes import EpisodeSettings
 
         level = _level(self.world)
-        _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers, self.replan_s)
-        settings = EpisodeSettings(
-            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.replan_s
-        )
-        return level, settings
+        _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
+        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
 
 
 def with_world_options(func: F) -> F:
@@ -221,7 +204,7 @@ def execute_command(
         ]
         if run_id is not None or given:
             dropped = ([f"RUN_ID {run_id}"] if run_id is not None else []) + [
-                _WORLD_OPTIONS[n][1].param_decls[0].split("/")[0] for n in given
+                "--" + n.removesuffix("_s").removesuffix("_m").replace("_", "-") for n in given
             ]
             fail(f"--resume {resume} continues an episode as it was asked: drop {', '.join(dropped)}")
         _resume(ctx, resume, as_json)
@@ -297,16 +280,9 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
     parameters = _episode_parameters(store, episode_id)
     drift_m = parameters.get("drift_m")
     workers = parameters.get("workers")
-    replan_s = parameters.get("replan_s")  # absent in episodes stored before it existed: None
-    if (
-        not isinstance(drift_m, float)
-        or not 0 < drift_m <= 1
-        or not isinstance(workers, int)
-        or workers < 1
-        or not (replan_s is None or (isinstance(replan_s, float) and 0 < replan_s < float("inf")))
-    ):
+    if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, replan_s)
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():

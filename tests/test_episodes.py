@@ -16,15 +16,7 @@ from sqlalchemy import func, select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.experiments.episodes import (
-    Episode,
-    EpisodeSettings,
-    ModelPlanner,
-    Replan,
-    plan_of_run,
-    replan_budget,
-    resume_state,
-)
+from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
 from twisted.experiments.robustness import FINISHED, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
@@ -135,51 +127,6 @@ class SeenByPlanner(ModelPlanner):
     def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
         self.given.append((points, seed, timeout_s, like))
         return super().replan(points, seed, timeout_s, like)
-
-
-class NeverSolves(ModelPlanner):
-    """A planner whose every replan finds no plan (a search that ran out of time), recording its budget."""
-
-    budgets: list[float]
-
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
-        self.budgets.append(timeout_s)
-        return Replan(self.episode_run_id, None, 0.0, 0.001)
-
-
-def test_a_replan_searches_at_most_its_budget_doubled_after_each_that_found_nothing() -> None:
-    assert replan_budget(None, 3, 42.0) == 42.0  # no cap: the rest of the episode
-    assert [replan_budget(5.0, n, 100.0) for n in range(6)] == [5.0, 10.0, 20.0, 40.0, 80.0, 100.0]
-    assert replan_budget(5.0, 10**6, 7.0) == 7.0
-
-
-def test_replans_that_find_nothing_restart_from_the_same_observation_with_twice_the_time(
-    planned: tuple[str, int],
-) -> None:
-    db, run_id = planned
-    store, goal, options, plan = _parts(db, run_id)
-    episode_id = _episode_row(store, "strong", 4, plan, True)
-    planner = NeverSolves(store, goal, options, None, 1, episode_id)
-    planner.budgets = []
-    # a drift of 1 mm: the first action is off plan; no replan finds a plan, so the episode searches
-    # again from that observation, each time twice as long (stopped after six searches)
-    settings = EpisodeSettings(True, timeout_s=600.0, max_actions=5, drift_m=0.001, replan_s=2.0)
-    stopped_after = 6
-
-    def stop() -> bool:
-        return len(planner.budgets) >= stopped_after
-
-    try:
-        episode = Episode(store, episode_id, SimWorld(LEVELS["strong"], 4), goal, planner, settings, stop)
-        result = episode.run(episode.begin(plan))
-        assert result.outcome == "interrupted" and result.actions == 1
-        assert planner.budgets == pytest.approx([2.0, 4.0, 8.0, 16.0, 32.0, 64.0], abs=1e-9)
-        # a resumed episode goes on with the same doubling: six replans in a row found nothing
-        state, _ = resume_state(store, load_episode(store, episode_id).steps)
-        assert state.unsolved == stopped_after and state.plan is None
-    finally:
-        planner.close()
-        store.close()
 
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
@@ -317,8 +264,6 @@ def load_levels(store: Any) -> list[tuple[str, str]]:
         ["--loops", "sideways"],
         ["--knot", "granny-knot-of-doom"],
         ["--drift", "-1"],
-        ["--replan-timeout", "0"],
-        ["--replan-timeout", "700", "--timeout", "600"],
     ],
 )
 def test_robustness_refuses_bad_input_before_anything_is_written(tmp_path: Path, args: list[str]) -> None:

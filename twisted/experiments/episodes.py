@@ -45,15 +45,6 @@ MAX_PULLS = 3
 FIT_IN_GOAL = "the fit is in the goal"
 
 
-def replan_budget(replan_s: float | None, unsolved: int, remaining_s: float) -> float:
-    """Seconds the next replan's search may take: ``replan_s`` doubled for each replan before it that found
-    no plan from the same observation (a restart with another seed, given longer each time), never more
-    than the episode has left; ``replan_s`` None: all the episode has left (docs/DESIGN.md section 15.4)."""
-    if replan_s is None:
-        return remaining_s
-    return min(remaining_s, replan_s * 2.0 ** min(unsolved, 30))
-
-
 @dataclass(frozen=True)
 class PlanStep:
     """One node of a low-level plan: the action that leads to it (a curve as ``(link, z, x, y)``, None for
@@ -189,8 +180,6 @@ class EpisodeSettings:
     timeout_s: float
     max_actions: int = DEFAULT_MAX_ACTIONS
     drift_m: float = DEFAULT_DRIFT_M
-    # the first replan from an observation searches at most this long (None: the rest of the budget)
-    replan_s: float | None = None
 
 
 @dataclass
@@ -206,7 +195,6 @@ class EpisodeState:
     elapsed_s: float = 0.0
     replan_runs: list[int] = field(default_factory=list)
     pulls: int = 0
-    unsolved: int = 0  # replans in a row, from the observation last seen, that found no plan
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
     # the model's configuration of what the world's rope should now be (the last action's outcome in the
     # model); each observation is fitted near it (twisted.world.fit.ChainFit.fit). None: not known
@@ -371,7 +359,6 @@ class Episode:
     def _pull(self, state: EpisodeState) -> str | None:
         verdict = self.world.pull_test()
         state.pulls += 1
-        state.unsolved = 0
         seen = self.world.observe()
         state.points = seen.points
         self.progress(f"pull test: {verdict.knot or verdict.reason}")
@@ -388,10 +375,8 @@ class Episode:
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        budget = replan_budget(self.settings.replan_s, state.unsolved, remaining_s)
-        replanned = self.planner.replan(state.points, seed, budget, state.expected_q)
+        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q)
         state.replans += 1
-        state.unsolved = 0 if replanned.plan is not None else state.unsolved + 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
             state.replan_runs.append(replanned.run_id)
@@ -426,7 +411,6 @@ class Episode:
         seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
         state.actions += 1
         state.position += 1
-        state.unsolved = 0
         state.expected_q = step.q
         state.points = seen.points
         drift = _drift(seen.points, step)
@@ -468,12 +452,7 @@ def run_episode(
     from twisted.world import SimWorld
 
     world = SimWorld(level, seed)
-    parameters = {
-        "drift_m": settings.drift_m,
-        "replan_s": settings.replan_s,
-        "workers": planner.workers,
-        "level": level.to_dict(),
-    }
+    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
     run_id = create_episode(
         store,
         parameters,
@@ -491,16 +470,6 @@ def run_episode(
     stop = planner.stop or (lambda: False)
     episode = Episode(store, run_id, world, goal, planner, settings, stop, progress)
     return episode.run(episode.begin(plan))
-
-
-def _trailing_unsolved(steps: Sequence[Any]) -> int:
-    """The replans at the end of ``steps`` that found no plan (from the observation last stored)."""
-    count = 0
-    for step in reversed(steps):
-        if step.kind != "replan" or step.plan_run_id is not None or step.replan_run_id is None:
-            break
-        count += 1
-    return count
 
 
 def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
@@ -533,7 +502,6 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
-        unsolved=_trailing_unsolved(steps),
     )
     if plan is not None:  # the model's expectation of the rope: the node the plan last reached
         state.expected_q = plan.steps[position - 1].q if position else plan.root_q
