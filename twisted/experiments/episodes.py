@@ -249,7 +249,9 @@ def ties_goal(goal: Goal, p_data: PData) -> bool:
 
 
 def _drift(points: FloatArray, step: PlanStep) -> float:
-    return float(np.sqrt(np.mean(np.sum((points - step.points) ** 2, axis=1))))
+    from twisted.world import rms_distance
+
+    return rms_distance(points, step.points)
 
 
 class Episode:

@@ -9,10 +9,10 @@ from the child's direction in the parent's frame; of the two pairs that give a d
 degrees, the one within the joint limits. The roll of the middle link about its own axis is not seen in
 the points; the fit takes the roll nearest a configuration the rope is expected to be near (``like``: the
 model's outcome of the last action), else the roll whose hinge angles bend the chain least (the least
-elastic energy). Points lower than the model's link
-radius (less 2 mm) are raised to it (they lie on the table). Joint angles are clipped to the
-model's limits, the velocity is zero (a rope at rest), and the fit's residual is the RMS distance between
-the observed points and the points of the fitted configuration.
+elastic energy). Points lower than the model's link radius (less 2 mm) are raised to it (they lie on the
+table). Joint angles are clipped to the model's limits, the velocity is zero (a rope at rest), and the
+fit's residual is the RMS distance between the observed points and the points of the fitted
+configuration (:func:`rms_distance`).
 
 That first fit places each link from its own two points and the links before it, so the camera's noise
 adds up along the chain (about 1 cm RMS at the ``moderate`` level's 2 mm), enough to press one strand
@@ -62,6 +62,11 @@ class Fit:
 def observed_p_data(points: npt.ArrayLike) -> PData:
     """``Top`` of observed link points (the one P-data reader, topology.top)."""
     return top(np.asarray(points, dtype=np.float64))
+
+
+def rms_distance(points: FloatArray, other: FloatArray) -> float:
+    """The RMS distance (m) between two ropes' link points, point by point."""
+    return float(np.sqrt(np.mean(np.sum((points - other) ** 2, axis=1))))
 
 
 def _rz(a: float) -> FloatArray:
@@ -245,8 +250,7 @@ class ChainFit:
         q = np.concatenate([qpos, np.zeros(self.sim.model.nv)])
         self.sim.set_state(q)
         fitted = self.sim.link_points()
-        residual = float(np.sqrt(np.mean(np.sum((fitted - observed) ** 2, axis=1))))
-        return Fit(q, fitted, residual)
+        return Fit(q, fitted, rms_distance(fitted, observed))
 
     def rest_configuration(
         self, points: npt.ArrayLike, like: npt.ArrayLike | None = None
