@@ -19,6 +19,7 @@ from twisted.sim import (
     sample_curve,
     simulate,
 )
+from twisted.sim.mjcf import RopeParams
 from twisted.sim.simulator import LINK_RADIUS_M, MIN_LIFT_M, RELEASE_HEIGHT_M
 from twisted.topology import EMPTY, parse_p_data
 
@@ -257,3 +258,23 @@ def test_pool_matches_in_process_simulate(v_state: np.ndarray) -> None:
                 assert a.points is not None and r.points is not None
                 np.testing.assert_array_equal(r.points, a.points)
     assert not local[-1].ok and local[-1].state is None
+
+
+@pytest.mark.parametrize(("radius_m", "z_m", "deep"), [(0.011, 0.0005, False), (0.011, -0.0003, True)])
+def test_how_deep_a_rope_may_sink_is_in_its_own_radius(radius_m: float, z_m: float, deep: bool) -> None:
+    """A world's thicker rope sunk 10.5 mm into the table is within its 11 mm radius (the planner's
+    10 mm bound would reject it); 11.3 mm is past it."""
+    sim = RopeSim(params=RopeParams(link_radius_m=radius_m))
+    q = sim.state()
+    q[2] = z_m  # the middle link's free joint: the straight rope's centreline height
+    sim.set_state(q)
+    reason = sim.invalid_reason()
+    assert (reason is not None and reason.startswith("deep penetration")) is deep, reason
+
+
+def test_the_planners_rope_keeps_its_bound_of_one_radius() -> None:
+    sim = RopeSim()
+    q = sim.state()
+    q[2] = LINK_RADIUS_M - 0.0105  # 10.5 mm into the table: deeper than the 10 mm radius
+    sim.set_state(q)
+    assert sim.invalid_reason() == "deep penetration (0.0105 m > 0.01 m)"

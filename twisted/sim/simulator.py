@@ -66,8 +66,11 @@ SETTLE_CAP_S = 3.0
 # Validity of a configuration: anything else is rejected, never silently kept.
 WORKSPACE_RADIUS_M = 1.2
 MAX_HEIGHT_M = 0.3
-MIN_HEIGHT_M = -LINK_RADIUS_M / 2  # a centreline point this far under the table surface: through it
-MAX_PENETRATION_M = LINK_RADIUS_M
+# Both in link radii of the rope simulated (``RopeParams.link_radius_m``: a world's rope may be thicker
+# or thinner than the planner's): a centreline point this far under the table surface is through it,
+# and two geoms sunk this deep into each other have passed through
+MIN_HEIGHT_RADII = -0.5
+MAX_PENETRATION_RADII = 1.0
 
 # 5 ms rather than 2 ms: measured on 300 random curves from reached configurations, 0.032 s cpu
 # per action against 0.064 s, with the same rejections (none from the physics), crossings settled
@@ -273,6 +276,8 @@ class RopeSim:
         # the speed under which the rope counts as at rest (an attribute so that a bench can vary it)
         self.settle_speed_m_s = SETTLE_SPEED_M_S
         self._settle_cap_steps = round(SETTLE_CAP_S / m.opt.timestep)
+        self.min_height_m = MIN_HEIGHT_RADII * self.params.link_radius_m
+        self.max_penetration_m = MAX_PENETRATION_RADII * self.params.link_radius_m
         self.reset()
 
     # ---- state ---------------------------------------------------------------------------------
@@ -352,12 +357,12 @@ class RopeSim:
         if far > workspace_radius_m:
             return f"rope left the workspace ({far:.2f} m from the origin > {workspace_radius_m} m)"
         z_min, z_top = float(pts[:, 2].min()), float(pts[:, 2].max())
-        if z_min < MIN_HEIGHT_M:
+        if z_min < self.min_height_m:
             return f"rope went below the table (centreline at z = {z_min:.4f} m)"
         if z_top > MAX_HEIGHT_M:
             return f"rope flew up (centreline at z = {z_top:.2f} m > {MAX_HEIGHT_M} m)"
-        if d.ncon and float(d.contact.dist.min()) < -MAX_PENETRATION_M:
-            return f"deep penetration ({-float(d.contact.dist.min()):.4f} m > {MAX_PENETRATION_M} m)"
+        if d.ncon and (depth := -float(d.contact.dist[: d.ncon].min())) > self.max_penetration_m:
+            return f"deep penetration ({depth:.4f} m > {self.max_penetration_m:.4g} m)"
         return None
 
     # ---- the curve action -------------------------------------------------------------------------
@@ -681,8 +686,8 @@ class RopeSim:
         """
         d = self.data
         mujoco.mj_step(self.model, d)
-        if d.ncon and (depth := -float(d.contact.dist[: d.ncon].min())) > MAX_PENETRATION_M:
-            return f"deep penetration ({depth:.4f} m > {MAX_PENETRATION_M} m)"
+        if d.ncon and (depth := -float(d.contact.dist[: d.ncon].min())) > self.max_penetration_m:
+            return f"deep penetration ({depth:.4f} m > {self.max_penetration_m:.4g} m)"
         return None
 
     def _lands_on_strand(self, grasped_geom: int, link: int) -> bool:
