@@ -204,7 +204,7 @@ def execute_command(
         ]
         if run_id is not None or given:
             dropped = ([f"RUN_ID {run_id}"] if run_id is not None else []) + [
-                "--" + n.removesuffix("_s").removesuffix("_m").replace("_", "-") for n in given
+                _WORLD_OPTIONS[n][1].param_decls[0].split("/")[0] for n in given
             ]
             fail(f"--resume {resume} continues an episode as it was asked: drop {', '.join(dropped)}")
         _resume(ctx, resume, as_json)
