@@ -199,9 +199,8 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
                 assert info.parameters["episode"] == episode_id
         # the robustness table gives the median planning time of a replan over the group's episodes
         row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
-        searched = [s.planning_s for s in replans if s.replan_run_id is not None and s.planning_s is not None]
-        assert row.median_replan_s == pytest.approx(float(np.median(searched)), abs=1e-3)
-        assert row.replans == len(replans) and row.taken_up == 0  # a drift of 1 mm takes nothing up
+        planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
+        assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
 
 
 def test_a_replan_near_a_stored_plan_takes_it_up_instead_of_searching(planned: tuple[str, int]) -> None:

@@ -40,12 +40,7 @@ class RobustnessRow:
     replans_per_success: float | None
     planning_s_per_success: float | None
     wall_s_per_success: float | None
-    # planning time of one replan that searched, median over every episode's replans
-    median_replan_s: float | None = None
-    # replans that took up a stored solved path instead of searching (ModelPlanner.stored_plan_near), all
-    # episodes together, and the replans in all
-    taken_up: int = 0
-    replans: int = 0
+    median_replan_s: float | None = None  # planning time of one replan, median over every episode's replans
 
     @property
     def success(self) -> float:
@@ -64,8 +59,6 @@ class RobustnessRow:
             "planning_s_per_success": self.planning_s_per_success,
             "wall_s_per_success": self.wall_s_per_success,
             "median_replan_s": self.median_replan_s,
-            "replans": self.replans,
-            "taken_up": self.taken_up,
         }
 
 
@@ -99,18 +92,14 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
             ).where(EpisodeRow.outcome.in_(FINISHED))
         ).all()
         replans = session.execute(
-            select(
-                EpisodeRow.goal_knot,
-                EpisodeRow.level,
-                EpisodeRow.closed_loop,
-                EpisodeStep.planning_s,
-                EpisodeStep.replan_run_id,
-                EpisodeStep.plan_run_id,
-            )
+            select(EpisodeRow.goal_knot, EpisodeRow.level, EpisodeRow.closed_loop, EpisodeStep.planning_s)
             .join(EpisodeStep, EpisodeStep.episode_id == EpisodeRow.run_id)
-            .where(EpisodeRow.outcome.in_(FINISHED), EpisodeStep.kind == "replan")
+            .where(
+                EpisodeRow.outcome.in_(FINISHED),
+                EpisodeStep.kind == "replan",
+                EpisodeStep.planning_s.is_not(None),
+            )
         ).all()
-
     def key(r: Any) -> tuple[str, str, bool]:
         return (r.goal_knot, r.level, bool(r.closed_loop))
 
@@ -118,14 +107,8 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
     for r in rows:
         groups.setdefault(key(r), []).append(r)
     replan_s: dict[tuple[str, str, bool], list[float]] = {}
-    counts: dict[tuple[str, str, bool], list[int]] = {}  # [replans, taken up]
     for r in replans:
-        count = counts.setdefault(key(r), [0, 0])
-        count[0] += 1
-        if r.replan_run_id is None and r.plan_run_id is not None:
-            count[1] += 1
-        elif r.replan_run_id is not None and r.planning_s is not None:
-            replan_s.setdefault(key(r), []).append(float(r.planning_s))
+        replan_s.setdefault(key(r), []).append(float(r.planning_s))
     table = []
     for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
         group = groups[(knot, level, closed)]
@@ -142,8 +125,6 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 _mean([r.planning_s for r in tied]),
                 _mean([r.elapsed_s for r in tied]),
                 _median(replan_s.get((knot, level, closed), [])),
-                counts.get((knot, level, closed), [0, 0])[1],
-                counts.get((knot, level, closed), [0, 0])[0],
             )
         )
     return table
@@ -188,16 +169,14 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
 
     lines = [
         "| knot | level | loop | episodes | tied | success | actions / success | replans / success "
-        "| planning s / success | wall s / success | median s / replan that searched "
-        "| replans: stored plans taken up / all |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| planning s / success | wall s / success | median s / replan |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table:
         lines.append(
             f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
             f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
-            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} "
-            f"| {r.taken_up} / {r.replans} |"
+            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} |"
         )
     return lines
 
