@@ -16,14 +16,7 @@ from sqlalchemy import func, select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.experiments.episodes import (
-    MAX_TAKE_UPS,
-    Episode,
-    EpisodeSettings,
-    ModelPlanner,
-    plan_of_run,
-    resume_state,
-)
+from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
 from twisted.experiments.robustness import FINISHED, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
@@ -131,9 +124,9 @@ class SeenByPlanner(ModelPlanner):
 
     given: list[tuple[Any, ...]]
 
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None, near_m: Any = None) -> Any:
+    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
         self.given.append((points, seed, timeout_s, like))
-        return super().replan(points, seed, timeout_s, like, near_m)
+        return super().replan(points, seed, timeout_s, like)
 
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
@@ -201,41 +194,6 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
         row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
         planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
         assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
-
-
-def test_a_replan_near_a_stored_plan_takes_it_up_instead_of_searching(planned: tuple[str, int]) -> None:
-    db, run_id = planned
-    store, goal, options, plan = _parts(db, run_id)
-    episode_id = _episode_row(store, "none", 0, plan, True)
-    planner = ModelPlanner(store, goal, options, None, 1, episode_id)
-    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=4, drift_m=0.05)
-    runs = _count(db, Run)
-    try:
-        episode = Episode(store, episode_id, SimWorld(LEVELS["none"], 0), goal, planner, settings)
-        state = episode.begin(plan)  # the world's rope laid out as the plan's root, seen exactly
-        state.plan = None  # as if the world had left the plan: the episode replans from what it sees
-        assert episode._replan(state, 30.0) is None
-        # the observation is the stored plan's root: the plan is taken up there, and nothing is searched
-        assert state.plan is not None and state.plan.run_id == run_id and state.position == 0
-        assert state.replan_runs == [] and _count(db, Run) == runs
-        assert np.array_equal(state.expected_q, plan.root_q)
-        # the same node is taken up at most MAX_TAKE_UPS times in one episode, then the replan searches
-        for _ in range(MAX_TAKE_UPS - 1):
-            again = planner.replan(state.points, 1, 30.0, plan.root_q, 0.05)
-            assert again.run_id is None and again.plan is not None and again.position == 0
-        searched = planner.replan(state.points, 2, 30.0, plan.root_q, 0.05)
-        assert searched.run_id is not None and _count(db, Run) == runs + 1
-        # without ``near_m`` a replan always searches
-        assert planner.replan(state.points, 3, 30.0, plan.root_q).run_id is not None
-    finally:
-        planner.close()
-        store.close()
-    with open_store(db) as store:
-        steps = load_episode(store, episode_id).steps
-        replan = next(s for s in steps if s.kind == "replan")
-        assert replan.replan_run_id is None and replan.plan_run_id == run_id and replan.plan_step == 0
-        resumed, _ = resume_state(store, steps)
-        assert resumed.plan is not None and resumed.plan.run_id == run_id and resumed.position == 0
 
 
 def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:

@@ -43,9 +43,6 @@ MAX_PULLS = 3
 # What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
 # camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
 FIT_IN_GOAL = "the fit is in the goal"
-# How often one episode takes up the same node of a stored plan (ModelPlanner.stored_plan_near): a world
-# whose rope keeps coming back near a node whose next curve fails there is given a search instead.
-MAX_TAKE_UPS = 2
 
 
 @dataclass(frozen=True)
@@ -76,11 +73,6 @@ def plan_of_run(store: Any, run_id: int) -> Plan:
         _, path = solved_run(store, run_id)
     except NoPlanError as exc:
         raise PlanInputError(str(exc)) from None
-    return _plan_of_path(run_id, path)
-
-
-def _plan_of_path(run_id: int, path: Sequence[Any]) -> Plan:
-    """The plan of a solved run's path of stored nodes, root to goal."""
     steps = tuple(
         PlanStep(None if node.action == "cinch" else node.curve, node.p_data, node.points, node.q)
         for node in path[1:]
@@ -91,24 +83,13 @@ def _plan_of_path(run_id: int, path: Sequence[Any]) -> Plan:
 @dataclass
 class Replan:
     """What one replan gave: its planner run (None when the observation could not be made a configuration
-    of the model: ``reason``; or when a stored plan was taken up, :meth:`ModelPlanner.stored_plan_near`),
-    the plan when solved and the step of it to go on from, seconds, the fit's residual."""
+    of the model: ``reason``), the plan when solved, seconds, the fit's residual."""
 
     run_id: int | None
     plan: Plan | None
     planning_s: float
     fit_residual_m: float | None
     reason: str | None = None
-    position: int = 0
-
-
-@dataclass(frozen=True)
-class _SolvedPath:
-    """A solved run's plan, with the state and link points of each node before its goal node."""
-
-    plan: Plan
-    keys: tuple[str, ...]
-    points: tuple[FloatArray, ...]
 
 
 class ModelPlanner:
@@ -134,9 +115,6 @@ class ModelPlanner:
         self.workers, self.episode_run_id, self.stop = workers, episode_run_id, stop
         self._resources = SearchResources()
         self._fit: Any = None
-        self._solved: list[_SolvedPath] = []  # the store's solved paths toward the goal, read so far
-        self._read_up_to = 0  # the highest run id read for them
-        self._taken: dict[tuple[int | None, int, int], int] = {}  # (episode, run, node): times taken up
 
     def close(self) -> None:
         self._resources.close()
@@ -159,61 +137,11 @@ class ModelPlanner:
         assert result.run_id is not None  # a started search has its run
         return int(result.run_id), bool(result.solved)
 
-    def _solved_paths(self) -> list[_SolvedPath]:
-        """The solved runs toward the goal in the store made with these options (any seed; never a search
-        both ways), each read once: the model's plan, and the plans of every earlier replan."""
-        from twisted.store.search_tree import solved_run, solved_runs_toward
-
-        wanted = {k: v for k, v in self.options.to_dict().items() if k != "seed"}
-        for run_id, parameters in solved_runs_toward(self.store, self.goal, self._read_up_to):
-            self._read_up_to = max(self._read_up_to, run_id)
-            if parameters.get("both_ways") or any(parameters.get(k) != v for k, v in wanted.items()):
-                continue
-            _, path = solved_run(self.store, run_id)
-            if len(path) < 2 or path[-1].p_data not in self.goal:
-                continue
-            keys = tuple(node.p_data.key for node in path[:-1])
-            points = tuple(node.points for node in path[:-1])
-            self._solved.append(_SolvedPath(_plan_of_path(run_id, path), keys, points))
-        return self._solved
-
-    def stored_plan_near(self, p_data: PData, points: FloatArray, within_m: float) -> tuple[Plan, int] | None:
-        """A solved path of the store whose node before the goal is in state ``p_data`` with its link points
-        within ``within_m`` (RMS) of ``points``: that path's plan and the index of the step after the node
-        (the nearest such node; ties to the older run and the earlier node; a node this episode took up
-        :data:`MAX_TAKE_UPS` times is passed over). The test is the one by which closed loop keeps following
-        its own plan (``drift_m``), so a plan taken up here is followed as if the episode had been on it
-        (docs/DESIGN.md section 15.4)."""
-        from twisted.world import rms_distance
-
-        best: tuple[float, int, int, Plan] | None = None
-        for path in self._solved_paths():
-            for j, key in enumerate(path.keys):
-                taken = self._taken.get((self.episode_run_id, path.plan.run_id, j), 0)
-                if key != p_data.key or taken >= MAX_TAKE_UPS:
-                    continue
-                distance = rms_distance(points, path.points[j])
-                if distance <= within_m and (best is None or distance < best[0]):
-                    best = (distance, path.plan.run_id, j, path.plan)
-        if best is None:
-            return None
-        _, run_id, j, plan = best
-        node = (self.episode_run_id, run_id, j)
-        self._taken[node] = self._taken.get(node, 0) + 1
-        return plan, j
-
     def replan(
-        self,
-        points: FloatArray,
-        seed: int,
-        timeout_s: float,
-        like: FloatArray | None = None,
-        near_m: float | None = None,
+        self, points: FloatArray, seed: int, timeout_s: float, like: FloatArray | None = None
     ) -> Replan:
         """Fit the model's chain to observed ``points`` (near ``like``, the model's expectation of them,
-        when given) and let it rest in the model; with ``near_m``, take up a stored solved path that passes
-        within ``near_m`` of the observation in the fit's state (:meth:`stored_plan_near`); else store the
-        fit as a configuration and search from there."""
+        when given), let it rest in the model, store it as a configuration and search from there."""
         from twisted.store.queries import add_configuration
         from twisted.world import ChainFit
 
@@ -232,11 +160,6 @@ class ModelPlanner:
         if ties_goal(self.goal, p_data):
             # the fit ties the goal: nothing to plan (the episode pulls the rope)
             return Replan(None, None, time.perf_counter() - started, fit.residual_m, FIT_IN_GOAL)
-        if near_m is not None:
-            stored = self.stored_plan_near(p_data, np.asarray(points, dtype=np.float64), near_m)
-            if stored is not None:
-                taken, position = stored
-                return Replan(None, taken, time.perf_counter() - started, fit.residual_m, position=position)
         with self.store.session(write=True) as session:
             configuration = add_configuration(
                 session, run_id=self.episode_run_id, p_data=p_data, q=q, points=fitted_points
@@ -454,25 +377,19 @@ class Episode:
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        replanned = self.planner.replan(
-            state.points, seed, remaining_s, state.expected_q, self.settings.drift_m
-        )
+        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q)
         state.replans += 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
             state.replan_runs.append(replanned.run_id)
-        state.plan, state.position = replanned.plan, replanned.position
+        state.plan, state.position = replanned.plan, 0
         if replanned.plan is not None:
-            # the configuration the plan goes on from: the fit at rest it was searched from, or the node
-            # of a stored plan taken up
-            position = replanned.position
-            state.expected_q = replanned.plan.steps[position - 1].q if position else replanned.plan.root_q
-        if replanned.plan is not None and replanned.run_id is None:
-            outcome = f"took up run {replanned.plan.run_id} at step {replanned.position}"
-        else:
-            found = "solved" if replanned.plan else replanned.reason or "not solved"
-            outcome = f"run {replanned.run_id}, {found}"
-        self.progress(f"replan {state.replans}: {outcome} in {replanned.planning_s:.1f} s")
+            state.expected_q = replanned.plan.root_q  # the fit at rest the plan starts from
+        self.progress(
+            f"replan {state.replans}: run {replanned.run_id}, "
+            f"{'solved' if replanned.plan else replanned.reason or 'not solved'} "
+            f"in {replanned.planning_s:.1f} s"
+        )
         self._record(
             state,
             "replan",
@@ -481,10 +398,10 @@ class Episode:
             fit_residual_m=replanned.fit_residual_m,
             fault=replanned.reason,
             plan_run_id=None if replanned.plan is None else replanned.plan.run_id,
-            plan_step=replanned.position,
+            plan_step=0,
         )
         state.fit_in_goal = replanned.reason == FIT_IN_GOAL
-        if replanned.run_id is None and replanned.plan is None and not state.fit_in_goal:
+        if replanned.run_id is None and not state.fit_in_goal:
             return "lost"
         return None
 

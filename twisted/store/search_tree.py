@@ -634,40 +634,22 @@ def discard_after_checkpoint(store: Any, run_id: int) -> int:
         return int(count)
 
 
-def _toward(query: Any, goal: Goal) -> Any:
-    """``query`` (over ``SearchRunRow``) narrowed to the runs toward ``goal``."""
-    if goal.knot is not None:
-        return query.where(SearchRunRow.goal_knot == goal.knot, SearchRunRow.goal_cross == goal.cross)
-    return query.join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id).where(
-        TopologicalState.key == goal.representative.key, SearchRunRow.goal_knot.is_(None)
-    )
-
-
 def find_resumable_run(store: Any, goal: Goal | None = None) -> int | None:
     """The newest planner run that did not solve its goal and is not live (for ``goal`` when given)."""
     with store.session() as session:
         query = select(SearchRunRow.run_id).where(SearchRunRow.outcome != "solved")
-        if goal is not None:
-            query = _toward(query, goal)
+        if goal is not None and goal.knot is not None:
+            query = query.where(SearchRunRow.goal_knot == goal.knot, SearchRunRow.goal_cross == goal.cross)
+        elif goal is not None:
+            query = query.join(TopologicalState, TopologicalState.id == SearchRunRow.goal_state_id).where(
+                TopologicalState.key == goal.representative.key, SearchRunRow.goal_knot.is_(None)
+            )
         candidates = list(session.scalars(query.order_by(SearchRunRow.run_id.desc())))
     for run_id in candidates:
         info = load_run(store, run_id, with_nodes=False)
         if info is not None and not info.live:
             return run_id
     return None
-
-
-def solved_runs_toward(store: Any, goal: Goal, after_run_id: int = 0) -> list[tuple[int, dict[str, Any]]]:
-    """The solved planner runs toward ``goal`` with an id above ``after_run_id``, oldest first: (run id, the
-    run's stored parameters, checked as any stored options are by the caller that uses them)."""
-    with store.session() as session:
-        query = (
-            select(SearchRunRow.run_id, Run.parameters)
-            .join(Run, Run.id == SearchRunRow.run_id)
-            .where(SearchRunRow.outcome == "solved", SearchRunRow.run_id > after_run_id)
-        )
-        rows = session.execute(_toward(query, goal).order_by(SearchRunRow.run_id)).all()
-    return [(int(run_id), parameters if isinstance(parameters, dict) else {}) for run_id, parameters in rows]
 
 
 class NoPlanError(LookupError):
