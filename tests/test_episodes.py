@@ -17,13 +17,13 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
-from twisted.experiments.robustness import FINISHED, robustness_table
+from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
 from twisted.store.models import Run, blob_to_array
 from twisted.store.search_tree import SearchNode, load_run
-from twisted.world import LEVELS, SimWorld, World
+from twisted.world import LEVELS, PullVerdict, SimWorld, World
 
 ONE_CROSSING = '[[1,"O",2,"+"],[2,"U",1,"+"]]'
 runner = CliRunner()
@@ -194,6 +194,43 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
         row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
         planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
         assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
+
+
+class CannotPull(Spy):
+    """A world whose simulator cannot carry a pull out (as the world's rope at twice the friction)."""
+
+    def pull_test(self) -> PullVerdict:
+        self.used.add("pull_test")
+        return PullVerdict(None, "deep penetration (0.0112 m > 0.01115 m)")
+
+
+def test_a_rope_the_world_cannot_pull_ends_unpulled_not_untied(planned: tuple[str, int]) -> None:
+    db, run_id = planned
+    store, goal, options, plan = _parts(db, run_id)
+    episode_id = _episode_row(store, "none", 0, plan, False)
+    planner = ModelPlanner(store, goal, options, None, 1, episode_id)
+    try:
+        episode = Episode(
+            store,
+            episode_id,
+            CannotPull(SimWorld(LEVELS["none"], 0)),
+            goal,
+            planner,
+            EpisodeSettings(False, 60.0),
+        )
+        result = episode.run(episode.begin(plan))
+    finally:
+        planner.close()
+        store.close()
+    assert result.outcome == "unpulled" and result.final_knot is None and "unpulled" in FINISHED
+    with open_store(db) as store:
+        stored = load_episode(store, episode_id)
+        assert stored.outcome == "unpulled"
+        assert stored.steps[-1].kind == "pull_test" and "deep penetration" in (stored.steps[-1].fault or "")
+        # the robustness table says how the untied episodes ended
+        row = next(r for r in robustness_table(store) if not r.closed_loop and r.level == "none")
+        assert row.untied.get("unpulled", 0) >= 1 and row.to_dict()["untied"] == row.untied
+        assert any("unpulled" in line for line in robustness_markdown([row]))
 
 
 def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:

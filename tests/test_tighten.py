@@ -157,6 +157,24 @@ def test_a_tightened_overhand_from_a_stored_plan_stays_a_trefoil(overhand_run: t
         assert len(tightenings(session, run_id)) == 2  # one per --tighten replay
 
 
+def test_a_pull_to_half_the_tension_reads_the_same_trefoil(overhand_run: tuple[str, dict]) -> None:
+    """A world whose rope the full pull presses through itself pulls again to half the tension
+    (twisted.world.SimWorld.pull_test): on a rope the full pull can do, both read the same knot."""
+    from twisted.store.search_tree import solved_run
+    from twisted.tighten import TAUT_LAG_M
+
+    db, result = overhand_run
+    with open_store(db) as store:
+        _, path = solved_run(store, result["run_id"])
+    sim = tightening_sim()
+    full = tighten(sim, path[-1].q)
+    half = tighten(sim, path[-1].q, taut_lag_m=0.5 * TAUT_LAG_M)
+    assert full.ok and half.ok, (full.reason, half.reason)
+    assert half.knot_name == full.knot_name and full.knot_name in ("3_1+", "3_1-")
+    assert half.end_distance_m is not None and full.end_distance_m is not None
+    assert half.end_distance_m < full.end_distance_m + 1e-6  # less tension: the ends no further apart
+
+
 def test_render_draws_the_plan_beside_the_tightened_knot(
     overhand_run: tuple[str, dict], tmp_path: Path
 ) -> None:

@@ -116,6 +116,47 @@ def test_sim_world_is_a_world() -> None:
     assert [f.name for f in dataclasses.fields(Observation)] == ["points", "fault"]
 
 
+def test_a_pull_the_world_rejects_for_deep_penetration_is_tried_again_at_half_the_tension(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """At friction x1.6-1.9 (``strong``) the world's full pull presses one strand through another before
+    the rope resists as much as the planner's does; the world pulls the same rope again, more gently,
+    and says so. The first pull's rejection is made here (it needs a knotted high-friction rope); the
+    second pull is the real one, of the straight rope."""
+    import twisted.world.sim_world as sim_world
+    from twisted.tighten import TAUT_LAG_M, Tightened
+
+    real, lags = sim_world.tighten, []
+
+    def tighten(sim: RopeSim, state: np.ndarray, taut_lag_m: float = TAUT_LAG_M) -> Tightened:
+        lags.append(taut_lag_m)
+        if taut_lag_m == TAUT_LAG_M:
+            return Tightened(
+                False, "deep penetration (0.0112 m > 0.01115 m)", None, None, None, None, 0.1, 0.1
+            )
+        return real(sim, state, taut_lag_m)
+
+    monkeypatch.setattr(sim_world, "tighten", tighten)
+    world = SimWorld(LEVELS["none"], 0)
+    world.reset()
+    verdict = world.pull_test()
+    assert lags == [TAUT_LAG_M, sim_world.GENTLE_PULL * TAUT_LAG_M]
+    assert verdict.knot == "0_1" and verdict.reason is None
+    assert verdict.note is not None and "deep penetration" in verdict.note and "0.5" in verdict.note
+    # a rejection for another reason is not tried again
+    lags.clear()
+    monkeypatch.setattr(
+        sim_world,
+        "tighten",
+        lambda sim, state, taut_lag_m=TAUT_LAG_M: (
+            lags.append(taut_lag_m)
+            or Tightened(False, "simulation diverged", None, None, None, None, 0.1, 0.1)
+        ),
+    )
+    verdict = world.pull_test()
+    assert lags == [TAUT_LAG_M] and verdict.knot is None and verdict.reason == "simulation diverged"
+
+
 def _random_ropes(sim: RopeSim, rng: np.random.Generator) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Random curves applied to ``sim`` one after another without end (one the simulator rejects is
     undone): the configuration and link points after each one carried out."""

@@ -115,8 +115,11 @@ def _nlerp(a: FloatArray, b: FloatArray, s: float) -> FloatArray:
     return q / np.linalg.norm(q)
 
 
-def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
-    """Pull the rope in ``state`` tight on ``sim`` (made by :func:`tightening_sim`) and read its knot."""
+def tighten(sim: RopeSim, state: npt.ArrayLike, taut_lag_m: float = TAUT_LAG_M) -> Tightened:
+    """Pull the rope in ``state`` tight on ``sim`` (made by :func:`tightening_sim`) and read its knot.
+
+    ``taut_lag_m``: how far a gripper leads its link when the pull stops (the tension it pulls to); a
+    world whose rope the full pull presses through itself pulls again at less (docs/DESIGN.md 15.1)."""
     started = time.perf_counter()
     if not sim.tail_gripper:
         raise ValueError("the pull test needs a simulator with a tail gripper (tightening_sim())")
@@ -179,7 +182,7 @@ def tighten(sim: RopeSim, state: npt.ArrayLike) -> Tightened:
                 return result(reason)
         if (reason := sim.invalid_reason(PULL_WORKSPACE_RADIUS_M)) is not None:
             return result(reason)
-        if sim.end_lag_m() > TAUT_LAG_M:
+        if sim.end_lag_m() > taut_lag_m:
             break
         if float(np.linalg.norm(tail - head)) > MAX_SEPARATION_M:
             return result("the ends came further apart than the rope is long, without tension")

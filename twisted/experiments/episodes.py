@@ -6,7 +6,8 @@ points with the plan's next node; when the state is another, the points lie furt
 from the plan's, or the world reports a fault, it plans again in the planner's model from a configuration
 fitted to the observed points (:class:`ModelPlanner`), and it pulls the rope as soon as the observed state
 is one of the goal's. The episode ends when the world's rope passes the pull test for the goal's knot,
-or when the budget (``timeout_s`` of wall time, planning included, and ``max_actions``) is spent.
+or when the budget (``timeout_s`` of wall time, planning included, and ``max_actions``) is spent. A
+rope the world could not pull (its last pull test has a reason instead of a knot) ends ``unpulled``.
 
 The planner sees only observations: :class:`ModelPlanner.replan` takes link points, nothing of the world.
 Every step is stored (:mod:`twisted.store.episodes`) with the world's checkpoint, so that an episode
@@ -19,7 +20,7 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +28,9 @@ import numpy.typing as npt
 from twisted.goals import Goal, PlanInputError
 from twisted.runtime import StopSignals
 from twisted.topology import PData, PDataError, top
+
+if TYPE_CHECKING:
+    from twisted.world.protocol import PullVerdict
 
 logger = logging.getLogger(__name__)
 
@@ -342,11 +346,13 @@ class Episode:
             in_goal = state.fit_in_goal or (observed is not None and ties_goal(self.goal, observed))
             if in_goal if s.closed_loop else plan_done:
                 state.fit_in_goal = False
-                knot = self._pull(state)
+                verdict = self._pull(state)
+                knot = verdict.knot
                 if self.goal.tightened_ties(knot):
                     return "tied", knot
                 if not s.closed_loop or state.pulls >= MAX_PULLS:
-                    return "not_tied", knot
+                    # a pull the world could not carry out says nothing of the knot: not "not tied"
+                    return ("unpulled" if knot is None and verdict.reason else "not_tied"), knot
                 state.plan = None
                 continue
             if plan_done or state.plan is None:
@@ -358,21 +364,24 @@ class Episode:
                 return "out_of_budget", knot
             self._act(state)
 
-    def _pull(self, state: EpisodeState) -> str | None:
+    def _pull(self, state: EpisodeState) -> PullVerdict:
+        """The world's pull test, then the rope observed as the pull left it; both stored."""
         verdict = self.world.pull_test()
         state.pulls += 1
         seen = self.world.observe()
         state.points = seen.points
-        self.progress(f"pull test: {verdict.knot or verdict.reason}")
+        self.progress(
+            f"pull test: {verdict.knot or verdict.reason}" + (f" ({verdict.note})" if verdict.note else "")
+        )
         self._record(
             state,
             "pull_test",
             **self._observation(seen.points),
             knot=verdict.knot,
-            fault=verdict.reason,
+            fault=verdict.reason or verdict.note,  # a note: how the knot was read (at less tension)
             world_checkpoint=self.world.checkpoint(),
         )
-        return verdict.knot  # type: ignore[no-any-return]
+        return verdict
 
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""

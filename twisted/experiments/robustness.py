@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,7 @@ from twisted.goals import PlanInputError
 from twisted.runtime import StopSignals
 
 LEVEL_ORDER = ("none", "mild", "moderate", "strong")
-FINISHED = ("tied", "not_tied", "out_of_budget", "lost")
+FINISHED = ("tied", "not_tied", "unpulled", "out_of_budget", "lost")
 
 
 @dataclass
@@ -41,6 +41,8 @@ class RobustnessRow:
     planning_s_per_success: float | None
     wall_s_per_success: float | None
     median_replan_s: float | None = None  # planning time of one replan, median over every episode's replans
+    # how the episodes that did not tie ended: outcome -> count (not_tied, unpulled, out_of_budget, lost)
+    untied: dict[str, int] = field(default_factory=dict)
 
     @property
     def success(self) -> float:
@@ -59,6 +61,7 @@ class RobustnessRow:
             "planning_s_per_success": self.planning_s_per_success,
             "wall_s_per_success": self.wall_s_per_success,
             "median_replan_s": self.median_replan_s,
+            "untied": self.untied,
         }
 
 
@@ -100,6 +103,7 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeStep.planning_s.is_not(None),
             )
         ).all()
+
     def key(r: Any) -> tuple[str, str, bool]:
         return (r.goal_knot, r.level, bool(r.closed_loop))
 
@@ -125,6 +129,7 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 _mean([r.planning_s for r in tied]),
                 _mean([r.elapsed_s for r in tied]),
                 _median(replan_s.get((knot, level, closed), [])),
+                {o: n for o in FINISHED if o != "tied" and (n := sum(r.outcome == o for r in group))},
             )
         )
     return table
@@ -169,14 +174,15 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
 
     lines = [
         "| knot | level | loop | episodes | tied | success | actions / success | replans / success "
-        "| planning s / success | wall s / success | median s / replan |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| planning s / success | wall s / success | median s / replan | not tied: how they ended |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table:
         lines.append(
             f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
             f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
-            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} |"
+            f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} "
+            f"| {', '.join(f'{o} {n}' for o, n in r.untied.items()) or '-'} |"
         )
     return lines
 

@@ -61,7 +61,7 @@ __all__ = [
     "reopen_episode",
 ]
 
-EPISODE_OUTCOMES = ("running", "tied", "not_tied", "out_of_budget", "lost", "interrupted")
+EPISODE_OUTCOMES = ("running", "tied", "not_tied", "unpulled", "out_of_budget", "lost", "interrupted")
 STEP_KINDS = ("reset", "curve", "cinch", "replan", "pull_test")
 
 

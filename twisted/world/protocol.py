@@ -35,6 +35,7 @@ class PullVerdict:
 
     knot: str | None
     reason: str | None = None
+    note: str | None = None  # how the knot was read when not by the usual pull (e.g. at less tension)
 
 
 @runtime_checkable
