@@ -16,7 +16,16 @@ from sqlalchemy import func, select
 from typer.testing import CliRunner
 
 from cli.main import app
-from twisted.experiments.episodes import Episode, EpisodeSettings, ModelPlanner, plan_of_run
+from twisted.experiments.episodes import (
+    FIT_REJECTED,
+    MAX_LOOKS,
+    Episode,
+    EpisodeSettings,
+    ModelPlanner,
+    Replan,
+    plan_of_run,
+    resume_state,
+)
 from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table
 from twisted.planner import stored_options
 from twisted.store import open_store
@@ -194,6 +203,53 @@ def test_the_planner_gets_observations_only(planned: tuple[str, int]) -> None:
         row = next(r for r in robustness_table(store) if r.closed_loop and r.level == "strong")
         planning = sorted(s.planning_s for s in replans if s.planning_s is not None)
         assert row.median_replan_s == pytest.approx(float(np.median(planning)), abs=1e-3)
+
+
+class RejectsFits(ModelPlanner):
+    """The model planner whose first ``rejects`` replans find the observation cannot be fitted (as a
+    strand pressed through another in the noise of one camera frame at ``strong``)."""
+
+    rejects: int
+
+    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
+        if self.rejects > 0:
+            self.rejects -= 1
+            return Replan(None, None, 0.0, 0.01, FIT_REJECTED)
+        return super().replan(points, seed, timeout_s, like)
+
+
+@pytest.mark.parametrize("rejects", [1, 99])
+def test_an_observation_the_model_cannot_fit_is_taken_again_before_the_episode_is_lost(
+    planned: tuple[str, int], rejects: int
+) -> None:
+    db, run_id = planned
+    store, goal, options, plan = _parts(db, run_id)
+    episode_id = _episode_row(store, "strong", 3, plan, True)
+    planner = RejectsFits(store, goal, options, None, 1, episode_id)
+    planner.rejects = rejects
+    # a drift of 1 mm: the first action is off plan, so the episode replans after it
+    settings = EpisodeSettings(closed_loop=True, timeout_s=60.0, max_actions=2, drift_m=0.001)
+    try:
+        episode = Episode(store, episode_id, SimWorld(LEVELS["strong"], 3), goal, planner, settings)
+        result = episode.run(episode.begin(plan))
+    finally:
+        planner.close()
+        store.close()
+    with open_store(db) as store:
+        steps = load_episode(store, episode_id).steps
+    kinds = [s.kind for s in steps]
+    looks = [s for s in steps if s.kind == "observe"]
+    assert all(s.points is not None and s.world_checkpoint is not None for s in looks)
+    if rejects == 1:  # one frame could not be fitted: the next one was, and the episode went on
+        assert len(looks) == 1 and result.outcome != "lost"
+        assert kinds[kinds.index("observe") - 1] == "replan" and kinds[kinds.index("observe") + 1] == "replan"
+        assert result.replans >= 2
+    else:  # none can be fitted: MAX_LOOKS frames more, then lost
+        assert result.outcome == "lost" and len(looks) == MAX_LOOKS and result.replans == MAX_LOOKS + 1
+        assert kinds[-2:] == ["observe", "replan"]
+        # a resume counts the looks already taken
+        with open_store(db) as store:
+            assert resume_state(store, steps[:-1])[0].looks == MAX_LOOKS
 
 
 class CannotPull(Spy):

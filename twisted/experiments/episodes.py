@@ -47,6 +47,12 @@ MAX_PULLS = 3
 # What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
 # camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
 FIT_IN_GOAL = "the fit is in the goal"
+# What a replan says when the observed rope cannot be made a configuration of the model (a fit pressed
+# through a strand at every height stretch, or points no chain fits): the episode looks again, up to
+# MAX_LOOKS times in a row, before it ends ``lost`` (docs/DESIGN.md section 15.4).
+FIT_REJECTED = "the model rejects the fit"
+NO_FIT = "no fit"
+MAX_LOOKS = 3
 
 
 @dataclass(frozen=True)
@@ -155,11 +161,9 @@ class ModelPlanner:
         try:
             fit, rest = self._fit.rest_configuration(points, like)
         except ValueError as exc:
-            return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}")
+            return Replan(None, None, time.perf_counter() - started, None, f"{NO_FIT}: {exc}")
         if rest is None:
-            return Replan(
-                None, None, time.perf_counter() - started, fit.residual_m, "the model rejects the fit"
-            )
+            return Replan(None, None, time.perf_counter() - started, fit.residual_m, FIT_REJECTED)
         q, fitted_points, p_data = rest
         if ties_goal(self.goal, p_data):
             # the fit ties the goal: nothing to plan (the episode pulls the rope)
@@ -199,6 +203,7 @@ class EpisodeState:
     elapsed_s: float = 0.0
     replan_runs: list[int] = field(default_factory=list)
     pulls: int = 0
+    looks: int = 0  # observations taken again in a row because the last one could not be fitted
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
     # the model's configuration of what the world's rope should now be (the last action's outcome in the
     # model); each observation is fitted near it (twisted.world.fit.ChainFit.fit). None: not known
@@ -411,8 +416,24 @@ class Episode:
         )
         state.fit_in_goal = replanned.reason == FIT_IN_GOAL
         if replanned.run_id is None and not state.fit_in_goal:
-            return "lost"
+            unfitted = (replanned.reason or "").startswith((FIT_REJECTED, NO_FIT))
+            if not unfitted or state.looks >= MAX_LOOKS:
+                return "lost"
+            self._look_again(state)
+            return None
+        state.looks = 0
         return None
+
+    def _look_again(self, state: EpisodeState) -> None:
+        """Observe the rope again, no action: a camera frame the model cannot fit is not the rope's last
+        word (the next one has other noise; docs/DESIGN.md section 15.4)."""
+        seen = self.world.observe()
+        state.looks += 1
+        state.points = seen.points
+        self.progress(f"look again ({state.looks} of {MAX_LOOKS}): the last observation could not be fitted")
+        self._record(
+            state, "observe", **self._observation(seen.points), world_checkpoint=self.world.checkpoint()
+        )
 
     def _act(self, state: EpisodeState) -> None:
         from twisted.sim import Curve
@@ -483,6 +504,18 @@ def run_episode(
     return episode.run(episode.begin(plan))
 
 
+def _trailing_looks(steps: Sequence[Any]) -> int:
+    """How many observations in a row the episode last took again: ``observe`` steps since the last step
+    that was neither one nor a replan that could not fit (a replan with a planner run had its fit)."""
+    looks = 0
+    for step in reversed(steps):
+        if step.kind == "observe":
+            looks += 1
+        elif step.kind != "replan" or step.replan_run_id is not None:
+            break
+    return looks
+
+
 def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
     """Where a stopped episode stood after its last stored step, and the world's checkpoint to restore.
 
@@ -513,6 +546,7 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
+        looks=_trailing_looks(steps),
     )
     if plan is not None:  # the model's expectation of the rope: the node the plan last reached
         state.expected_q = plan.steps[position - 1].q if position else plan.root_q
