@@ -214,7 +214,7 @@ class RejectsFits(ModelPlanner):
     def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
         if self.rejects > 0:
             self.rejects -= 1
-            return Replan(None, None, 0.0, 0.01, FIT_REJECTED)
+            return Replan(None, None, 0.0, 0.01, FIT_REJECTED, unfitted=True)
         return super().replan(points, seed, timeout_s, like)
 
 

@@ -47,11 +47,10 @@ MAX_PULLS = 3
 # What a replan says when the observed rope, fitted and at rest in the model, is already in the goal (the
 # camera's noise can add a crossing to Top of the raw points that the rope at rest does not have): pull it.
 FIT_IN_GOAL = "the fit is in the goal"
-# What a replan says when the observed rope cannot be made a configuration of the model (a fit pressed
-# through a strand at every height stretch, or points no chain fits): the episode looks again, up to
-# MAX_LOOKS times in a row, before it ends ``lost`` (docs/DESIGN.md section 15.4).
+# What a replan says when its fit is pressed through a strand at every height stretch. When the observed
+# rope cannot be made a configuration of the model (that, or points no chain fits: ``Replan.unfitted``),
+# the episode looks again, up to MAX_LOOKS times in a row, before it ends ``lost`` (DESIGN 15.4).
 FIT_REJECTED = "the model rejects the fit"
-NO_FIT = "no fit"
 MAX_LOOKS = 3
 
 
@@ -100,6 +99,7 @@ class Replan:
     planning_s: float
     fit_residual_m: float | None
     reason: str | None = None
+    unfitted: bool = False  # the observation could not be made a configuration (the episode looks again)
 
 
 class ModelPlanner:
@@ -161,9 +161,11 @@ class ModelPlanner:
         try:
             fit, rest = self._fit.rest_configuration(points, like)
         except ValueError as exc:
-            return Replan(None, None, time.perf_counter() - started, None, f"{NO_FIT}: {exc}")
+            return Replan(None, None, time.perf_counter() - started, None, f"no fit: {exc}", unfitted=True)
         if rest is None:
-            return Replan(None, None, time.perf_counter() - started, fit.residual_m, FIT_REJECTED)
+            return Replan(
+                None, None, time.perf_counter() - started, fit.residual_m, FIT_REJECTED, unfitted=True
+            )
         q, fitted_points, p_data = rest
         if ties_goal(self.goal, p_data):
             # the fit ties the goal: nothing to plan (the episode pulls the rope)
@@ -416,8 +418,7 @@ class Episode:
         )
         state.fit_in_goal = replanned.reason == FIT_IN_GOAL
         if replanned.run_id is None and not state.fit_in_goal:
-            unfitted = (replanned.reason or "").startswith((FIT_REJECTED, NO_FIT))
-            if not unfitted or state.looks >= MAX_LOOKS:
+            if not replanned.unfitted or state.looks >= MAX_LOOKS:
                 return "lost"
             self._look_again(state)
             return None

@@ -103,7 +103,6 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
                 EpisodeStep.planning_s.is_not(None),
             )
         ).all()
-
     def key(r: Any) -> tuple[str, str, bool]:
         return (r.goal_knot, r.level, bool(r.closed_loop))
 
