@@ -319,7 +319,7 @@ def models_command(
     as_json: bool = json_option("the models"),
 ) -> None:
     """List the inverse models stored in the database (the planner uses the newest)."""
-    from twisted.model.registry import default_model_path, list_models
+    from twisted.model.registry import list_models, shipped_model_path
 
     if export is not None:
         if import_file is not None:
@@ -341,8 +341,8 @@ def models_command(
         print_json([asdict(m) for m in models])
         return
     if not models:
-        path = default_model_path()
-        shipped = f"the shipped default {path}" if path.is_file() else "no model at all (run `twisted train`)"
+        path = shipped_model_path()
+        shipped = f"the shipped model {path}" if path.is_file() else "no model at all (run `twisted train`)"
         console.print(f"no models in the database; planning uses {shipped}")
         return
     _print_models(store, models)

@@ -382,17 +382,49 @@ with open_store("sqlite:///{db}") as store:
     for which in ("from_bytes", "file"):
         assert "the model is for a rope of 21 links x 0.04 m (0.84 m)" in lines[which]
         assert "this process runs a rope of 31 links x 0.04 m (1.24 m)" in lines[which]
-    assert lines["store"].startswith("the database holds no model, and the shipped default model is for")
-    assert "not this process's rope of 31 links" in lines["store"] and "`twisted train`" in lines["store"]
+    assert lines["store"].startswith("the database holds no model, and no model is shipped for this")
+    assert "process's rope of 31 links x 0.04 m (1.24 m) (models are shipped for: 21 links" in lines["store"]
+    assert "`twisted train`" in lines["store"]
 
 
 def test_a_31_link_plan_without_a_model_exits_2(tmp_path: Path) -> None:
     result = _twisted("31", "--db", f"sqlite:///{tmp_path / 'long.db'}", "plan", "--goal", ONE_CROSSING)
     assert result.returncode == 2, result.stderr
-    assert "the database holds no model, and the shipped default model is for the default rope" in _err(
+    assert "the database holds no model, and no model is shipped for this process's rope of 31 links" in _err(
         result
     )
     assert "Traceback" not in result.stderr
+
+
+def test_every_shipped_model_is_for_the_rope_its_file_names() -> None:
+    """Each ``twisted/data`` model loads in a process of the rope its file name gives (and only there),
+    with that rope's shapes; a misnamed file would make ``shipped_ropes`` lie."""
+    from twisted.model.registry import shipped_model_path, shipped_ropes
+
+    ropes = shipped_ropes()
+    assert ropes[0] == DEFAULT_ROPE and parse_rope("31c7") in ropes
+    code = (
+        "from twisted.model.registry import load_model\n"
+        "from twisted.rope import ROPE\n"
+        "model = load_model()\n"
+        "print(model.model_id, model.net.config.rope == ROPE, ROPE.env_value)\n"
+    )
+    for rope in ropes:
+        assert shipped_model_path(rope).is_file()
+        result = _python(code, None if rope == DEFAULT_ROPE else rope.env_value)
+        assert result.returncode == 0, result.stderr
+        assert result.stdout.split() == ["None", "True", rope.env_value]
+
+
+def test_a_31c7_process_with_an_empty_database_plans_with_its_shipped_model(tmp_path: Path) -> None:
+    """``TWISTED_ROPE=31c7`` works right after installation, as the default rope does: the database holds
+    no model, the shipped ``model_31c7.pt`` plans (a one-crossing goal on the 31-link rope)."""
+    db = tmp_path / "r31c7.db"
+    result = _twisted("31c7", "--db", f"sqlite:///{db}", "plan", "--goal", ONE_CROSSING, "--timeout", "60")
+    assert result.returncode == 0, result.stderr  # exit 0: solved (3 would be out of time)
+    assert _select(db, "SELECT status FROM runs WHERE kind = 'plan'") == [("finished",)]
+    assert _select(db, "SELECT COUNT(*) FROM models") == [(0,)]
+    assert _select(db, "SELECT n_links, max_crossings FROM rope_profile") == [(31, 7)]
 
 
 def test_models_stored_before_the_rope_field_are_21_links() -> None:

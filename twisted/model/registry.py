@@ -1,10 +1,12 @@
-"""Models in the database, and the default model shipped with the package.
+"""Models in the database, and the models shipped with the package.
 
 ``load_model(store)`` returns the newest model in the ``models`` table, or the one asked for by
-id; when the database holds none it falls back to ``twisted/data/default_model.pt`` (installed as
-package data), so planning works right after installation. The shipped model is for the default rope
-(21 links): a process running another (``TWISTED_ROPE``) never falls back to it, and a stored model of
-another rope than the process's is refused (:class:`ModelError` naming both).
+id; when the database holds none it falls back to the model shipped for the process's rope (installed
+as package data), so planning works right after installation: ``twisted/data/default_model.pt`` for
+the default rope (21 links), ``twisted/data/model_<TWISTED_ROPE value>.pt`` for another rope a model
+is shipped for (``model_31c7.pt``: 31 links, states of up to 7 crossings, for the knot table's
+7-crossing knots). A process on a rope with no shipped model never falls back to another rope's, and a
+stored model of another rope than the process's is refused (:class:`ModelError` naming both).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from sqlalchemy import select
 
 from twisted.model.config import ModelRopeError
 from twisted.model.network import InverseModel
-from twisted.rope import DEFAULT_ROPE, ROPE
+from twisted.rope import DEFAULT_ROPE, ROPE, RopeProfile, parse_rope
 from twisted.store.db import Store
 from twisted.store.models import by_id_or_newest
 from twisted.store.training import TrainedModel
@@ -34,9 +36,13 @@ __all__ = [
     "load_model",
     "load_model_file",
     "save_model",
+    "shipped_model_file",
+    "shipped_model_path",
+    "shipped_ropes",
 ]
 
 DEFAULT_MODEL_FILE = "default_model.pt"
+_SHIPPED_PREFIX = "model_"
 
 
 class ModelError(LookupError):
@@ -91,26 +97,55 @@ def list_models(store: Store) -> list[ModelInfo]:
     return [ModelInfo(*row) for row in rows]
 
 
+def _data_dir() -> Path:
+    return Path(str(resources.files("twisted") / "data"))
+
+
+def shipped_model_file(rope: RopeProfile = ROPE) -> str:
+    """The file name under ``twisted/data`` of the model shipped for ``rope``: ``default_model.pt`` for
+    the default rope, ``model_<TWISTED_ROPE value>.pt`` for another (``model_31c7.pt``)."""
+    return DEFAULT_MODEL_FILE if rope == DEFAULT_ROPE else f"{_SHIPPED_PREFIX}{rope.env_value}.pt"
+
+
+def shipped_model_path(rope: RopeProfile = ROPE) -> Path:
+    """Where the model shipped for ``rope`` (default: the process's) lives, whether or not it exists."""
+    return _data_dir() / shipped_model_file(rope)
+
+
 def default_model_path() -> Path:
-    """Where the shipped default model lives (inside the installed package)."""
-    return Path(str(resources.files("twisted") / "data" / DEFAULT_MODEL_FILE))
+    """Where the shipped model of the default rope lives (inside the installed package)."""
+    return shipped_model_path(DEFAULT_ROPE)
+
+
+def shipped_ropes() -> list[RopeProfile]:
+    """The ropes a model is shipped for: the default rope's file first, then the others by name."""
+    ropes = [DEFAULT_ROPE] if default_model_path().is_file() else []
+    for path in sorted(_data_dir().glob(f"{_SHIPPED_PREFIX}*.pt")):
+        try:
+            rope = parse_rope(path.stem[len(_SHIPPED_PREFIX) :])
+        except ValueError:
+            continue  # a file of another name: not a shipped model
+        if rope != DEFAULT_ROPE and path.name == shipped_model_file(rope):
+            ropes.append(rope)
+    return ropes
 
 
 def load_default_model(why: str = "") -> InverseModel:
-    """The model shipped with the package (for the default rope only; ``why``: what the message of a
-    process on another rope starts with, e.g. that the database holds no model)."""
-    path = default_model_path()
-    if ROPE != DEFAULT_ROPE:
-        raise ModelError(
-            f"{why}the shipped default model is for the default rope of {DEFAULT_ROPE.name}, not this "
-            f"process's rope of {ROPE.name}: train a model for this rope with `twisted train`"
-        )
+    """The model shipped with the package for the process's rope (``why``: what the message starts
+    with when there is none, e.g. that the database holds no model)."""
+    path = shipped_model_path()
     if not path.is_file():
+        if ROPE != DEFAULT_ROPE:
+            shipped = "; ".join(f"{rope.name} (TWISTED_ROPE={rope.env_value})" for rope in shipped_ropes())
+            raise ModelError(
+                f"{why}no model is shipped for this process's rope of {ROPE.name} (models are shipped "
+                f"for: {shipped or 'none'}): train a model for this rope with `twisted train`"
+            )
         raise ModelError(
             f"no trained model: the database holds none and the shipped default {path} is missing; "
             "train one with `twisted train`"
         )
-    return _from_bytes(path.read_bytes(), None, f"the shipped default {path}")
+    return _from_bytes(path.read_bytes(), None, f"the shipped model {path}")
 
 
 def load_model_file(path: Path) -> InverseModel:
