@@ -336,6 +336,7 @@ class _Bar(SearchProgress):
 
 def _print_model(sampler: Any, as_json: bool) -> None:
     """Which inverse model the search samples from, and how many samples of each source trained it."""
+    from twisted.model.registry import shipped_model_file
     from twisted.planner import model_info
 
     info = model_info(sampler)
@@ -343,8 +344,10 @@ def _print_model(sampler: Any, as_json: bool) -> None:
         return
     sources = info["model_samples"]
     used = info["model_id"]
+    # the process's rope has its own shipped file (default_model.pt, model_31c7.pt, ...)
+    name = f"(shipped, {shipped_model_file()})" if used is None else used
     err_console.print(
-        f"inverse model {'(shipped default)' if used is None else used}: trained on "
+        f"inverse model {name}: trained on "
         + ", ".join(f"{n:,} {source}" for source, n in sources.items() if n)
         + " samples",
         highlight=False,

@@ -422,6 +422,7 @@ def test_a_31c7_process_with_an_empty_database_plans_with_its_shipped_model(tmp_
     db = tmp_path / "r31c7.db"
     result = _twisted("31c7", "--db", f"sqlite:///{db}", "plan", "--goal", ONE_CROSSING, "--timeout", "60")
     assert result.returncode == 0, result.stderr  # exit 0: solved (3 would be out of time)
+    assert "inverse model (shipped, model_31c7.pt): trained on" in result.stderr  # this rope's file named
     assert _select(db, "SELECT status FROM runs WHERE kind = 'plan'") == [("finished",)]
     assert _select(db, "SELECT COUNT(*) FROM models") == [(0,)]
     assert _select(db, "SELECT n_links, max_crossings FROM rope_profile") == [(31, 7)]
