@@ -85,6 +85,14 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
             help="Closed loop: replan when the observed points lie further (RMS, m) from the plan's.",
         ),
     ),
+    "straighten": (
+        bool,
+        typer.Option(
+            True,
+            "--straighten/--no-straighten",
+            help="Closed loop: a rope in a dead end for the goal is pulled straight before the replan.",
+        ),
+    ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
 }
 
@@ -99,6 +107,7 @@ class WorldRequest:
     timeout_s: float
     max_actions: int
     drift_m: float
+    straighten: bool
     workers: int
 
     def check(self) -> tuple[Any, Any]:
@@ -107,7 +116,10 @@ class WorldRequest:
 
         level = _level(self.world)
         _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
-        return level, EpisodeSettings(self.closed_loop, self.timeout_s, self.max_actions, self.drift_m)
+        settings = EpisodeSettings(
+            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.straighten
+        )
+        return level, settings
 
 
 def with_world_options(func: F) -> F:
@@ -282,7 +294,11 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
     workers = parameters.get("workers")
     if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m)
+    # an episode stored before straightening existed ran without it
+    straighten = parameters.get("straighten", False)
+    if not isinstance(straighten, bool):
+        fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
+    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, straighten)
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():

@@ -289,6 +289,85 @@ def test_a_rope_the_world_cannot_pull_ends_unpulled_not_untied(planned: tuple[st
         assert any("unpulled" in line for line in robustness_markdown([row]))
 
 
+def _two_crossings() -> np.ndarray:
+    """A configuration of the model's rope with two crossings (seeded random curves from straight)."""
+    from twisted.sim import RopeSim, sample_curve
+
+    sim, rng = RopeSim(), np.random.default_rng(0)
+    reached = [sim.state()]
+    for _ in range(400):
+        sim.set_state(reached[int(rng.integers(len(reached)))])
+        if sim.apply(sample_curve(rng)).ok:
+            if sim.p_data().cross == 2:
+                return sim.state()
+            if sim.p_data().cross < 2:
+                reached.append(sim.state())
+    raise AssertionError("no two-crossing rope in 400 random curves")
+
+
+class PullsAKnot(Spy):
+    """A world whose pull reads a knot and leaves the rope as it was (a rope that will not come straight)."""
+
+    knot = "3_1+"
+
+    def pull_test(self) -> PullVerdict:
+        self.used.add("pull_test")
+        return PullVerdict(self.knot, None)
+
+
+class PullsNoStraighter(PullsAKnot):
+    """A world whose pull reads no knot but leaves the rope's crossings (a twist that does not pull out)."""
+
+    knot = "0_1"
+
+
+@pytest.mark.parametrize("world_kind", ["straightens", "no-straighten", "knotted", "stays"])
+def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
+    planned: tuple[str, int], world_kind: str
+) -> None:
+    """Toward one crossing, a rope of two crossings is a dead end: adding moves never reach the goal."""
+    db, run_id = planned
+    store, goal, options, plan = _parts(db, run_id)
+    episode_id = _episode_row(store, "none", 0, plan, True)
+    kinds_of_world = {"knotted": PullsAKnot, "stays": PullsNoStraighter}
+    world = kinds_of_world.get(world_kind, Spy)(SimWorld(LEVELS["none"], 0))
+    planner = ModelPlanner(store, goal, options, None, 1, episode_id)
+    settings = EpisodeSettings(True, 20.0, max_actions=1, straighten=world_kind != "no-straighten")
+    try:
+        episode = Episode(store, episode_id, world, goal, planner, settings)
+        state = episode.begin(plan)
+        # the world's rope as a curve in another world might leave it: two crossings, off the plan
+        state.points, state.plan = world.reset(_two_crossings()).points, None
+        result = episode.run(state)
+    finally:
+        planner.close()
+        store.close()
+    with open_store(db) as store:
+        steps = load_episode(store, episode_id).steps
+        resumed = resume_state(store, steps)[0]
+    kinds = [s.kind for s in steps]
+    assert kinds[0] == "reset", (kinds, result)
+    if world_kind == "no-straighten":
+        assert "straighten" not in kinds and kinds[1] == "replan" and result.straightens == 0
+        return
+    # pulled once, stored with what the pull read and the world's checkpoint, then planned from
+    assert kinds[1:3] == ["straighten", "replan"], (kinds, result)
+    pulled = steps[1]
+    assert pulled.world_checkpoint is not None and pulled.points is not None
+    assert result.straightens == resumed.straightens == kinds.count("straighten")
+    assert "pull_test" in world.used
+    if world_kind != "stays":  # the rope came straight, or it is knotted: once
+        assert kinds.count("straighten") == 1
+    if world_kind == "straightens":  # no knot: the rope comes straight, and the replan starts there
+        assert pulled.knot == "0_1" and pulled.observed_key == "[]" and resumed.may_straighten
+    elif world_kind == "stays":  # still in a dead end after the pull: planned from, not pulled again
+        assert pulled.knot == "0_1" and pulled.observed_key != "[]"
+        moved = [k for k in kinds if k in ("curve", "straighten")]
+        assert all(a != b for a, b in zip(moved, moved[1:], strict=False)), kinds
+    else:  # a rope that pulls to a knot is not pulled again: it stays knotted
+        assert pulled.knot == "3_1+" and pulled.observed_key != "[]" and not resumed.may_straighten
+
+
 def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:
     db, run_id = planned
     code, out = _execute(db, str(run_id), "--world", "strong", "--seed", "9", "--json")

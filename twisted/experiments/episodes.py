@@ -5,9 +5,11 @@ rope at the end. Closed loop, after every action, reads the observation's P-data
 points with the plan's next node; when the state is another, the points lie further than ``drift_m`` (RMS)
 from the plan's, or the world reports a fault, it plans again in the planner's model from a configuration
 fitted to the observed points (:class:`ModelPlanner`), and it pulls the rope as soon as the observed state
-is one of the goal's. The episode ends when the world's rope passes the pull test for the goal's knot,
-or when the budget (``timeout_s`` of wall time, planning included, and ``max_actions``) is spent. A
-rope the world could not pull (its last pull test has a reason instead of a knot) ends ``unpulled``.
+is one of the goal's. A rope seen in a dead end for the goal (no adding move leads from its state to a goal
+state) is first pulled straight by both ends, and the replan starts from the straight rope. The episode
+ends when the world's rope passes the pull test for the goal's knot, or when the budget (``timeout_s`` of
+wall time, planning included, and ``max_actions``) is spent. A rope the world could not pull (its last
+pull test has a reason instead of a knot) ends ``unpulled``.
 
 The planner sees only observations: :class:`ModelPlanner.replan` takes link points, nothing of the world.
 Every step is stored (:mod:`twisted.store.episodes`) with the world's checkpoint, so that an episode
@@ -52,6 +54,8 @@ FIT_IN_GOAL = "the fit is in the goal"
 # the episode looks again, up to MAX_LOOKS times in a row, before it ends ``lost`` (DESIGN 15.4).
 FIT_REJECTED = "the model rejects the fit"
 MAX_LOOKS = 3
+# What the world's pull reads on a rope with no knot.
+UNKNOT = "0_1"
 
 
 @dataclass(frozen=True)
@@ -190,6 +194,8 @@ class EpisodeSettings:
     timeout_s: float
     max_actions: int = DEFAULT_MAX_ACTIONS
     drift_m: float = DEFAULT_DRIFT_M
+    # closed loop: a rope in a dead end for the goal is pulled straight before the replan (DESIGN 15.4)
+    straighten: bool = True
 
 
 @dataclass
@@ -207,6 +213,11 @@ class EpisodeState:
     pulls: int = 0
     looks: int = 0  # observations taken again in a row because the last one could not be fitted
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
+    straightens: int = 0  # the rope pulled straight because it was in a dead end for the goal
+    may_straighten: bool = True  # False once a straightening pull read a knot, or could not be done
+    # the last step pulled the rope straight: it is planned from as it lies, even if still in a dead end
+    # (a rope pulled straight with a crossing left in it, a twist or an end lying across, is not pulled again)
+    just_straightened: bool = False
     # the model's configuration of what the world's rope should now be (the last action's outcome in the
     # model); each observation is fitted near it (twisted.world.fit.ChainFit.fit). None: not known
     expected_q: FloatArray | None = None
@@ -222,6 +233,7 @@ class EpisodeResult:
     elapsed_s: float
     final_knot: str | None
     replan_runs: list[int]
+    straightens: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -234,6 +246,7 @@ class EpisodeResult:
             "elapsed_s": round(self.elapsed_s, 3),
             "final_knot": self.final_knot,
             "replan_runs": self.replan_runs,
+            "straightens": self.straightens,
         }
 
 
@@ -337,6 +350,7 @@ class Episode:
             elapsed,
             knot,
             state.replan_runs,
+            state.straightens,
         )
 
     def _loop(self, state: EpisodeState) -> tuple[str, str | None]:
@@ -363,6 +377,11 @@ class Episode:
                 state.plan = None
                 continue
             if plan_done or state.plan is None:
+                if self._dead_end(state):
+                    straightened = self._straighten(state)
+                    if self.goal.knot is not None and self.goal.tightened_ties(straightened):
+                        return "tied", straightened  # the pull read the knot (a state goal needs the state)
+                    continue
                 replanned = self._replan(state, remaining)
                 if replanned is not None:
                     return replanned, knot
@@ -389,6 +408,40 @@ class Episode:
             world_checkpoint=self.world.checkpoint(),
         )
         return verdict
+
+    def _dead_end(self, state: EpisodeState) -> bool:
+        """Whether the observed rope has crossings from which adding crossings never reaches a goal state
+        (more than the goal's, or one no goal state has), so that a replan would have to remove them in a
+        rope the world has bent: then it is pulled straight first (closed loop, ``straighten``)."""
+        from twisted.planner.both_ways import both_ways_needed
+
+        wanted = self.settings.closed_loop and self.settings.straighten
+        if not wanted or not state.may_straighten or state.just_straightened:
+            return False
+        observed = _observed(state.points)
+        return observed is not None and observed.cross > 0 and both_ways_needed(observed, self.goal)
+
+    def _straighten(self, state: EpisodeState) -> str | None:
+        """Pull the world's rope straight by both ends (the pull test's act: DESIGN 15.4) and observe it;
+        the knot the pull read (None: the world could not pull, and the rope is as it was)."""
+        verdict = self.world.pull_test()
+        seen = self.world.observe()
+        state.straightens += 1
+        state.just_straightened = True
+        state.points = seen.points
+        state.expected_q = None  # the model made no rope like the pulled one: the fit takes the least bent
+        # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
+        state.may_straighten = verdict.knot == UNKNOT
+        self.progress(f"straightened: {verdict.knot or verdict.reason}")
+        self._record(
+            state,
+            "straighten",
+            **self._observation(seen.points),
+            knot=verdict.knot,
+            fault=verdict.reason or verdict.note,
+            world_checkpoint=self.world.checkpoint(),
+        )
+        return verdict.knot
 
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
@@ -444,6 +497,7 @@ class Episode:
         seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
         state.actions += 1
         state.position += 1
+        state.just_straightened = False
         state.expected_q = step.q
         state.points = seen.points
         drift = _drift(seen.points, step)
@@ -485,7 +539,12 @@ def run_episode(
     from twisted.world import SimWorld
 
     world = SimWorld(level, seed)
-    parameters = {"drift_m": settings.drift_m, "workers": planner.workers, "level": level.to_dict()}
+    parameters = {
+        "drift_m": settings.drift_m,
+        "straighten": settings.straighten,
+        "workers": planner.workers,
+        "level": level.to_dict(),
+    }
     run_id = create_episode(
         store,
         parameters,
@@ -517,6 +576,12 @@ def _trailing_looks(steps: Sequence[Any]) -> int:
     return looks
 
 
+def _straightened_last(steps: Sequence[Any]) -> bool:
+    """Whether the rope was pulled straight after the episode's last action (no action since)."""
+    moved = [s.kind for s in steps if s.kind in ("curve", "cinch", "straighten")]
+    return bool(moved) and moved[-1] == "straighten"
+
+
 def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
     """Where a stopped episode stood after its last stored step, and the world's checkpoint to restore.
 
@@ -546,6 +611,9 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         elapsed_s=float(last.elapsed_s),
         replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
+        straightens=sum(1 for s in steps if s.kind == "straighten"),
+        may_straighten=all(s.knot == UNKNOT for s in steps if s.kind == "straighten"),
+        just_straightened=_straightened_last(steps),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
         looks=_trailing_looks(steps),
     )

@@ -62,7 +62,7 @@ __all__ = [
 ]
 
 EPISODE_OUTCOMES = ("running", "tied", "not_tied", "unpulled", "out_of_budget", "lost", "interrupted")
-STEP_KINDS = ("reset", "curve", "cinch", "replan", "observe", "pull_test")
+STEP_KINDS = ("reset", "curve", "cinch", "replan", "observe", "pull_test", "straighten")
 
 
 class EpisodeRow(Base):
