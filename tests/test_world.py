@@ -16,12 +16,10 @@ from twisted.world import (
     ChainFit,
     LevelError,
     Observation,
-    PlanarMotion,
     SimWorld,
     World,
     observed_p_data,
     parse_level,
-    planar_motion,
 )
 
 CURVES = [Curve(5, 0.03, 0.1, 0.2), Curve(14, 0.05, -0.15, -0.1), Curve(3, 0.02, 0.2, -0.05)]
@@ -258,25 +256,3 @@ def test_a_straight_rope_is_fitted_at_the_roll_it_was_laid_out_with() -> None:
     assert abs(float(fit.fit(sim.link_points(), like=q).q[3:7] @ q[3:7])) > 1 - 1e-12
     with pytest.raises(ValueError, match="expected configuration"):
         fit.fit(sim.link_points(), like=q[:10])
-
-
-def test_a_rope_moved_on_the_table_is_the_same_rope_for_the_same_curve_moved() -> None:
-    """The model's physics do not see a turn about the vertical and a shift on the table: a configuration
-    moved has its points moved, and a curve whose carry is turned with it ends in the moved outcome."""
-    sim, rng = RopeSim(), np.random.default_rng(3)
-    for _ in range(4):
-        sim.apply(sample_curve(rng))
-    q, points = sim.state(), sim.link_points()
-    motion = PlanarMotion(0.7, 0.05, -0.08)
-    sim.set_state(motion.configuration(q))
-    assert np.allclose(sim.link_points(), motion.points(points), atol=1e-12)
-    found, rms = planar_motion(points, sim.link_points())  # the motion is recovered from the points
-    assert rms < 1e-9 and np.allclose([found.angle_rad, found.dx_m, found.dy_m], [0.7, 0.05, -0.08])
-    curve = Curve(5, 0.03, 0.12, -0.2)
-    sim.set_state(q)
-    here = sim.apply(curve)
-    ends = sim.link_points()
-    sim.set_state(motion.configuration(q))
-    there = sim.apply(Curve(curve.link, curve.z_max_m, *motion.displacement(curve.x_m, curve.y_m)))
-    assert here.ok and there.ok
-    assert np.allclose(sim.link_points(), motion.points(ends), atol=1e-6)

@@ -32,7 +32,6 @@ from twisted.runtime import StopSignals
 from twisted.topology import PData, PDataError, top
 
 if TYPE_CHECKING:
-    from twisted.world import PlanarMotion
     from twisted.world.protocol import PullVerdict
 
 logger = logging.getLogger(__name__)
@@ -72,40 +71,11 @@ class PlanStep:
 
 @dataclass(frozen=True)
 class Plan:
-    """A solved planner run's plan: the root's configuration and link points, then the steps (root
-    excluded)."""
+    """A solved planner run's plan: the root's configuration, then the steps (root excluded)."""
 
     run_id: int
     root_q: FloatArray
     steps: tuple[PlanStep, ...]
-    root_points: FloatArray
-
-    def moved(self, motion: PlanarMotion) -> Plan:
-        """The same plan for the rope moved by ``motion`` on the table: every curve's carry turned with it,
-        every node's points and configuration moved (docs/DESIGN.md section 15.4)."""
-
-        def curve(c: tuple[int, float, float, float] | None) -> tuple[int, float, float, float] | None:
-            return None if c is None else (c[0], c[1], *motion.displacement(c[2], c[3]))
-
-        steps = tuple(
-            PlanStep(curve(s.curve), s.p_data, motion.points(s.points), motion.configuration(s.q))
-            for s in self.steps
-        )
-        return Plan(self.run_id, motion.configuration(self.root_q), steps, motion.points(self.root_points))
-
-    def inside(self, radius_m: float) -> bool:
-        """Whether every node's rope and every carry's target lie within ``radius_m`` of the origin (the
-        workspace: a plan moved toward its edge asks for carries the world will not carry out)."""
-        starts = (self.root_points, *(s.points for s in self.steps[:-1]))
-        for start, step in zip(starts, self.steps, strict=True):
-            if float(np.max(np.linalg.norm(step.points, axis=1))) > radius_m:
-                return False
-            if step.curve is not None:
-                link, _, x_m, y_m = step.curve
-                target = (start[link, :2] + start[link + 1, :2]) / 2.0 + np.array([x_m, y_m])
-                if float(np.linalg.norm(target)) > radius_m:
-                    return False
-        return True
 
 
 def plan_of_run(store: Any, run_id: int) -> Plan:
@@ -120,7 +90,7 @@ def plan_of_run(store: Any, run_id: int) -> Plan:
         PlanStep(None if node.action == "cinch" else node.curve, node.p_data, node.points, node.q)
         for node in path[1:]
     )
-    return Plan(run_id, path[0].q, steps, path[0].points)
+    return Plan(run_id, path[0].q, steps)
 
 
 @dataclass
@@ -327,7 +297,6 @@ class Episode:
         self.progress = progress or (lambda line: None)
         self._clock = 0.0
         self._started = time.perf_counter()
-        self._first: Plan | None = None  # the plan the episode began with (loaded on a resume)
 
     # ---- bookkeeping ----------------------------------------------------------------------------------
 
@@ -357,7 +326,6 @@ class Episode:
 
     def begin(self, plan: Plan) -> EpisodeState:
         """Lay the world's rope out as the plan's root and observe it (the episode's first step)."""
-        self._first = plan
         seen = self.world.reset(plan.root_q)
         state = EpisodeState(seen.points, plan, 0, expected_q=plan.root_q)
         self._record(
@@ -409,7 +377,7 @@ class Episode:
                 state.plan = None
                 continue
             if plan_done or state.plan is None:
-                if self._to_straighten(state):
+                if self._dead_end(state):
                     straightened = self._straighten(state)
                     if self.goal.knot is not None and self.goal.tightened_ties(straightened):
                         return "tied", straightened  # the pull read the knot (a state goal needs the state)
@@ -441,18 +409,17 @@ class Episode:
         )
         return verdict
 
-    def _to_straighten(self, state: EpisodeState) -> bool:
-        """Whether the rope, off its plan, is pulled straight before a replan (closed loop, ``straighten``):
-        when it has no crossing to keep, or when it is in a dead end for the goal, with crossings from which
-        adding crossings never reaches a goal state (more than the goal's, or one no goal state has), so that
-        a replan would have to remove them in a rope the world has bent (docs/DESIGN.md section 15.4)."""
+    def _dead_end(self, state: EpisodeState) -> bool:
+        """Whether the observed rope has crossings from which adding crossings never reaches a goal state
+        (more than the goal's, or one no goal state has), so that a replan would have to remove them in a
+        rope the world has bent: then it is pulled straight first (closed loop, ``straighten``)."""
         from twisted.planner.both_ways import both_ways_needed
 
         wanted = self.settings.closed_loop and self.settings.straighten
         if not wanted or not state.may_straighten or state.just_straightened:
             return False
         observed = _observed(state.points)
-        return observed is not None and (observed.cross == 0 or both_ways_needed(observed, self.goal))
+        return observed is not None and observed.cross > 0 and both_ways_needed(observed, self.goal)
 
     def _straighten(self, state: EpisodeState) -> str | None:
         """Pull the world's rope straight by both ends (the pull test's act: DESIGN 15.4) and observe it;
@@ -465,8 +432,6 @@ class Episode:
         state.expected_q = None  # the model made no rope like the pulled one: the fit takes the least bent
         # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
         state.may_straighten = verdict.knot == UNKNOT
-        if verdict.knot == UNKNOT:
-            self._take_up_first_plan(state)
         self.progress(f"straightened: {verdict.knot or verdict.reason}")
         self._record(
             state,
@@ -477,27 +442,6 @@ class Episode:
             world_checkpoint=self.world.checkpoint(),
         )
         return verdict.knot
-
-    def _take_up_first_plan(self, state: EpisodeState) -> None:
-        """A rope pulled straight that lies as the root of the plan the episode began with, moved on the
-        table (within ``drift_m`` RMS of it), follows that plan moved with it, no replan, unless the moved
-        plan leaves the workspace (the pulls carry the rope about: a plan moved to the edge fails there)."""
-        from twisted.world import planar_motion
-
-        if self._first is None:
-            from twisted.store.episodes import load_episode
-
-            stored = load_episode(self.store, self.run_id)
-            if stored.plan_run_id is None:
-                return
-            self._first = plan_of_run(self.store, int(stored.plan_run_id))
-        from twisted.sim.simulator import WORKSPACE_RADIUS_M
-
-        motion, rms = planar_motion(self._first.root_points, state.points)
-        moved = self._first.moved(motion)
-        if rms <= self.settings.drift_m and moved.inside(WORKSPACE_RADIUS_M):
-            state.plan, state.position = moved, 0
-            state.expected_q = moved.root_q
 
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
@@ -632,10 +576,6 @@ def _trailing_looks(steps: Sequence[Any]) -> int:
     return looks
 
 
-# the steps after which the episode follows another plan (or none): the first, a replan's, the first moved
-_PLAN_SETTERS = ("reset", "replan", "straighten", "pull_test")
-
-
 def _straightened_last(steps: Sequence[Any]) -> bool:
     """Whether the rope was pulled straight after the episode's last action (no action since)."""
     moved = [s.kind for s in steps if s.kind in ("curve", "cinch", "straighten")]
@@ -661,11 +601,6 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
             raise PlanInputError(
                 f"the episode's last step names step {position} of a plan of {len(plan.steps)}"
             )
-    setter = next((s for s in reversed(steps) if s.kind in _PLAN_SETTERS), None)
-    if plan is not None and setter is not None and setter.kind == "straighten" and setter.points is not None:
-        from twisted.world import planar_motion  # the first plan, moved to the rope that pull left
-
-        plan = plan.moved(planar_motion(plan.root_points, setter.points)[0])
     state = EpisodeState(
         points=last_seen.points,
         plan=plan,

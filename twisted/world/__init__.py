@@ -7,7 +7,7 @@ actions and observations; ``ChainFit`` turns observed link points back into a co
 planner's model.
 """
 
-from twisted.world.fit import ChainFit, Fit, PlanarMotion, observed_p_data, planar_motion, rms_distance
+from twisted.world.fit import ChainFit, Fit, observed_p_data, rms_distance
 from twisted.world.levels import LEVELS, Level, LevelError, check_level, parse_level
 from twisted.world.protocol import Observation, PullVerdict, World
 from twisted.world.sim_world import SimWorld, WorldPhysics, draw_physics
@@ -19,7 +19,6 @@ __all__ = [
     "Level",
     "LevelError",
     "Observation",
-    "PlanarMotion",
     "PullVerdict",
     "SimWorld",
     "World",
@@ -28,6 +27,5 @@ __all__ = [
     "draw_physics",
     "observed_p_data",
     "parse_level",
-    "planar_motion",
     "rms_distance",
 ]

@@ -69,61 +69,6 @@ def rms_distance(points: FloatArray, other: FloatArray) -> float:
     return float(np.sqrt(np.mean(np.sum((points - other) ** 2, axis=1))))
 
 
-@dataclass(frozen=True)
-class PlanarMotion:
-    """A turn about the vertical by ``angle_rad`` then a shift ``(dx_m, dy_m)`` on the table: the motions
-    the rope's physics do not see (the table is level and its friction the same in every direction), so a
-    plan moved by one is the same plan for the moved rope (docs/DESIGN.md section 15.4)."""
-
-    angle_rad: float
-    dx_m: float
-    dy_m: float
-
-    def _turn(self) -> FloatArray:
-        c, s = math.cos(self.angle_rad), math.sin(self.angle_rad)
-        return np.array([[c, -s], [s, c]])
-
-    def points(self, points: npt.ArrayLike) -> FloatArray:
-        """Link points moved (heights unchanged)."""
-        out = np.array(points, dtype=np.float64)
-        out[:, :2] = out[:, :2] @ self._turn().T + np.array([self.dx_m, self.dy_m])
-        return out
-
-    def displacement(self, x_m: float, y_m: float) -> tuple[float, float]:
-        """A carry's displacement (a curve's x, y: section 3.1) turned with the rope."""
-        dx, dy = self._turn() @ np.array([x_m, y_m])
-        return float(dx), float(dy)
-
-    def configuration(self, q: npt.ArrayLike) -> FloatArray:
-        """A configuration (qpos then qvel) moved: the free joint's position and orientation, and its linear
-        velocity; the hinges keep their angles (section 2.1)."""
-        out = np.array(q, dtype=np.float64)
-        turn = self._turn()
-        out[:2] = turn @ out[:2] + np.array([self.dx_m, self.dy_m])
-        half = self.angle_rad / 2.0
-        yaw = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
-        quat = np.empty(4)
-        mujoco.mju_mulQuat(quat, yaw, out[3:7])
-        out[3:7] = quat
-        nq = 7 + 2 * (N_LINKS - 1)  # the free joint, then a yaw and a pitch hinge per joint
-        out[nq : nq + 2] = turn @ out[nq : nq + 2]
-        return out
-
-
-def planar_motion(reference: npt.ArrayLike, observed: npt.ArrayLike) -> tuple[PlanarMotion, float]:
-    """The planar motion that carries ``reference`` link points nearest to ``observed`` ones, point by point
-    (least squares in the table's plane), and the RMS distance (m, in 3D) left between them."""
-    a = np.asarray(reference, dtype=np.float64)
-    b = np.asarray(observed, dtype=np.float64)
-    ca, cb = a[:, :2].mean(axis=0), b[:, :2].mean(axis=0)
-    u, v = a[:, :2] - ca, b[:, :2] - cb
-    angle = math.atan2(float(np.sum(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])), float(np.sum(u * v)))
-    c, s = math.cos(angle), math.sin(angle)
-    shift = cb - np.array([[c, -s], [s, c]]) @ ca
-    motion = PlanarMotion(angle, float(shift[0]), float(shift[1]))
-    return motion, rms_distance(motion.points(a), b)
-
-
 def _rz(a: float) -> FloatArray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
