@@ -368,6 +368,7 @@ class Episode:
             if in_goal if s.closed_loop else plan_done:
                 state.fit_in_goal = False
                 verdict = self._pull(state)
+                state.pulls += 1
                 knot = verdict.knot
                 if self.goal.tightened_ties(knot):
                     return "tied", knot
@@ -377,7 +378,7 @@ class Episode:
                 state.plan = None
                 continue
             if plan_done or state.plan is None:
-                if self._dead_end(state):
+                if self._dead_end(state, observed):
                     straightened = self._straighten(state)
                     if self.goal.knot is not None and self.goal.tightened_ties(straightened):
                         return "tied", straightened  # the pull read the knot (a state goal needs the state)
@@ -390,18 +391,19 @@ class Episode:
                 return "out_of_budget", knot
             self._act(state)
 
-    def _pull(self, state: EpisodeState) -> PullVerdict:
-        """The world's pull test, then the rope observed as the pull left it; both stored."""
+    def _pull(self, state: EpisodeState, kind: str = "pull_test") -> PullVerdict:
+        """The world's pull by both ends, then the rope observed as the pull left it; both stored as a step
+        of ``kind``: the goal's pull test, or a rope pulled straight (``straighten``)."""
         verdict = self.world.pull_test()
-        state.pulls += 1
         seen = self.world.observe()
         state.points = seen.points
         self.progress(
-            f"pull test: {verdict.knot or verdict.reason}" + (f" ({verdict.note})" if verdict.note else "")
+            f"{kind.replace('_', ' ')}: {verdict.knot or verdict.reason}"
+            + (f" ({verdict.note})" if verdict.note else "")
         )
         self._record(
             state,
-            "pull_test",
+            kind,
             **self._observation(seen.points),
             knot=verdict.knot,
             fault=verdict.reason or verdict.note,  # a note: how the knot was read (at less tension)
@@ -409,38 +411,27 @@ class Episode:
         )
         return verdict
 
-    def _dead_end(self, state: EpisodeState) -> bool:
-        """Whether the observed rope has crossings from which adding crossings never reaches a goal state
-        (more than the goal's, or one no goal state has), so that a replan would have to remove them in a
-        rope the world has bent: then it is pulled straight first (closed loop, ``straighten``)."""
+    def _dead_end(self, state: EpisodeState, observed: PData | None) -> bool:
+        """Whether the observed rope (``observed``: its P-data) has crossings from which adding crossings
+        never reaches a goal state (more than the goal's, or one no goal state has), so that a replan would
+        have to remove them in a rope the world has bent: then it is pulled straight first (closed loop,
+        ``straighten``)."""
         from twisted.planner.both_ways import both_ways_needed
 
         wanted = self.settings.closed_loop and self.settings.straighten
         if not wanted or not state.may_straighten or state.just_straightened:
             return False
-        observed = _observed(state.points)
         return observed is not None and observed.cross > 0 and both_ways_needed(observed, self.goal)
 
     def _straighten(self, state: EpisodeState) -> str | None:
         """Pull the world's rope straight by both ends (the pull test's act: DESIGN 15.4) and observe it;
         the knot the pull read (None: the world could not pull, and the rope is as it was)."""
-        verdict = self.world.pull_test()
-        seen = self.world.observe()
+        verdict = self._pull(state, "straighten")
         state.straightens += 1
         state.just_straightened = True
-        state.points = seen.points
         state.expected_q = None  # the model made no rope like the pulled one: the fit takes the least bent
         # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
         state.may_straighten = verdict.knot == UNKNOT
-        self.progress(f"straightened: {verdict.knot or verdict.reason}")
-        self._record(
-            state,
-            "straighten",
-            **self._observation(seen.points),
-            knot=verdict.knot,
-            fault=verdict.reason or verdict.note,
-            world_checkpoint=self.world.checkpoint(),
-        )
         return verdict.knot
 
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
