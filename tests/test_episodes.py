@@ -321,7 +321,7 @@ class PullsNoStraighter(PullsAKnot):
     knot = "0_1"
 
 
-@pytest.mark.parametrize("world_kind", ["straightens", "no-straighten", "knotted", "stays"])
+@pytest.mark.parametrize("world_kind", ["straightens", "no-straighten", "knotted", "stays", "cannot"])
 def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     planned: tuple[str, int], world_kind: str
 ) -> None:
@@ -329,9 +329,10 @@ def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     db, run_id = planned
     store, goal, options, plan = _parts(db, run_id)
     episode_id = _episode_row(store, "none", 0, plan, True)
-    kinds_of_world = {"knotted": PullsAKnot, "stays": PullsNoStraighter}
+    kinds_of_world = {"knotted": PullsAKnot, "stays": PullsNoStraighter, "cannot": CannotPull}
     world = kinds_of_world.get(world_kind, Spy)(SimWorld(LEVELS["none"], 0))
-    planner = ModelPlanner(store, goal, options, None, 1, episode_id)
+    planner = SeenByPlanner(store, goal, options, None, 1, episode_id)
+    planner.given = []
     settings = EpisodeSettings(True, 20.0, max_actions=1, straighten=world_kind != "no-straighten")
     try:
         episode = Episode(store, episode_id, world, goal, planner, settings)
@@ -356,8 +357,14 @@ def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     assert pulled.world_checkpoint is not None and pulled.points is not None
     assert result.straightens == resumed.straightens == kinds.count("straighten")
     assert "pull_test" in world.used
-    if world_kind != "stays":  # the rope came straight, or it is knotted: once
+    if world_kind != "stays":  # the rope came straight, is knotted, or could not be pulled: once
         assert kinds.count("straighten") == 1
+    like = planner.given[0][3]  # the model's expectation of the rope the first replan fits near
+    if world_kind == "cannot":  # the rope lies as it did: the expectation stands, and it is not pulled again
+        assert pulled.knot is None and pulled.fault and not resumed.may_straighten
+        assert like is not None and np.array_equal(like, plan.root_q)
+        return
+    assert like is None  # a pulled rope is one the model never made: the fit takes the least bent roll
     if world_kind == "straightens":  # no knot: the rope comes straight, and the replan starts there
         assert pulled.knot == "0_1" and pulled.observed_key == "[]" and resumed.may_straighten
     elif world_kind == "stays":  # still in a dead end after the pull: planned from, not pulled again

@@ -429,7 +429,8 @@ class Episode:
         verdict = self._pull(state, "straighten")
         state.straightens += 1
         state.just_straightened = True
-        state.expected_q = None  # the model made no rope like the pulled one: the fit takes the least bent
+        if verdict.knot is not None:  # pulled: the model made no rope like it; the fit takes the least bent
+            state.expected_q = None  # (a pull the world could not do leaves the rope and the expectation)
         # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
         state.may_straighten = verdict.knot == UNKNOT
         return verdict.knot
