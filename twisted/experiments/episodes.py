@@ -54,9 +54,6 @@ FIT_IN_GOAL = "the fit is in the goal"
 # the episode looks again, up to MAX_LOOKS times in a row, before it ends ``lost`` (DESIGN 15.4).
 FIT_REJECTED = "the model rejects the fit"
 MAX_LOOKS = 3
-# A rope still in a dead end after being pulled straight is pulled again, up to this many pulls in a row
-# before it is planned from as it lies (DESIGN 15.4).
-MAX_STRAIGHTENS_IN_A_ROW = 2
 # What the world's pull reads on a rope with no knot.
 UNKNOT = "0_1"
 
@@ -218,9 +215,9 @@ class EpisodeState:
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
     straightens: int = 0  # the rope pulled straight because it was in a dead end for the goal
     may_straighten: bool = True  # False once a straightening pull read a knot, or could not be done
-    # pulls straight since the last action: after MAX_STRAIGHTENS_IN_A_ROW a rope still in a dead end (a
-    # crossing left in its twist, an end lying across) is planned from as it lies, not pulled again
-    straightened_in_a_row: int = 0
+    # the last step pulled the rope straight: it is planned from as it lies, even if still in a dead end
+    # (a rope pulled straight with a crossing left in it, a twist or an end lying across, is not pulled again)
+    just_straightened: bool = False
     # the model's configuration of what the world's rope should now be (the last action's outcome in the
     # model); each observation is fitted near it (twisted.world.fit.ChainFit.fit). None: not known
     expected_q: FloatArray | None = None
@@ -422,9 +419,7 @@ class Episode:
         from twisted.planner.both_ways import both_ways_needed
 
         wanted = self.settings.closed_loop and self.settings.straighten
-        if not wanted or not state.may_straighten:
-            return False
-        if state.straightened_in_a_row >= MAX_STRAIGHTENS_IN_A_ROW:
+        if not wanted or not state.may_straighten or state.just_straightened:
             return False
         return observed is not None and observed.cross > 0 and both_ways_needed(observed, self.goal)
 
@@ -433,7 +428,7 @@ class Episode:
         the knot the pull read (None: the world could not pull, and the rope is as it was)."""
         verdict = self._pull(state, "straighten")
         state.straightens += 1
-        state.straightened_in_a_row += 1
+        state.just_straightened = True
         if verdict.knot is not None:  # pulled: the model made no rope like it; the fit takes the least bent
             state.expected_q = None  # (a pull the world could not do leaves the rope and the expectation)
         # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
@@ -494,7 +489,7 @@ class Episode:
         seen = self.world.cinch() if step.curve is None else self.world.execute(Curve(*step.curve))
         state.actions += 1
         state.position += 1
-        state.straightened_in_a_row = 0
+        state.just_straightened = False
         state.expected_q = step.q
         state.points = seen.points
         drift = _drift(seen.points, step)
@@ -573,13 +568,10 @@ def _trailing_looks(steps: Sequence[Any]) -> int:
     return looks
 
 
-def _straightened_in_a_row(steps: Sequence[Any]) -> int:
-    """How many times in a row the rope was pulled straight after the episode's last action."""
+def _straightened_last(steps: Sequence[Any]) -> bool:
+    """Whether the rope was pulled straight after the episode's last action (no action since)."""
     moved = [s.kind for s in steps if s.kind in ("curve", "cinch", "straighten")]
-    count = 0
-    while count < len(moved) and moved[-1 - count] == "straighten":
-        count += 1
-    return count
+    return bool(moved) and moved[-1] == "straighten"
 
 
 def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
@@ -613,7 +605,7 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
         straightens=sum(1 for s in steps if s.kind == "straighten"),
         may_straighten=all(s.knot == UNKNOT for s in steps if s.kind == "straighten"),
-        straightened_in_a_row=_straightened_in_a_row(steps),
+        just_straightened=_straightened_last(steps),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
         looks=_trailing_looks(steps),
     )
