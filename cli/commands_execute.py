@@ -93,6 +93,15 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
             help="Closed loop: a rope in a dead end for the goal is pulled straight before the replan.",
         ),
     ),
+    "stages": (
+        bool,
+        typer.Option(
+            True,
+            "--stages/--no-stages",
+            help="Closed loop, a composite knot (granny, square): replan for the first summand (an overhand) "
+            "until the rope ties one, then for the knot.",
+        ),
+    ),
     "workers": (int, typer.Option(1, "--workers", help="Simulator processes of each replan's search.")),
 }
 
@@ -108,6 +117,7 @@ class WorldRequest:
     max_actions: int
     drift_m: float
     straighten: bool
+    stages: bool
     workers: int
 
     def check(self) -> tuple[Any, Any]:
@@ -117,7 +127,7 @@ class WorldRequest:
         level = _level(self.world)
         _check_budget(self.timeout_s, self.max_actions, self.drift_m, self.workers)
         settings = EpisodeSettings(
-            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.straighten
+            self.closed_loop, self.timeout_s, self.max_actions, self.drift_m, self.straighten, self.stages
         )
         return level, settings
 
@@ -281,24 +291,27 @@ def _resume(ctx: typer.Context, episode_id: int, as_json: bool) -> None:
         fail(f"--resume {episode_id}: process {stored.pid} is still running it")
     if stored.plan_run_id is None:
         fail(f"--resume {episode_id}: the episode names no plan")
-    try:
-        level = Level.from_dict(stored.level_ranges)
-        world = SimWorld(level, stored.world_seed)
-        state, checkpoint = resume_state(store, stored.steps)
-        world.restore(checkpoint)
-    except (LevelError, PlanInputError, ValueError, KeyError, TypeError) as exc:
-        fail(f"--resume {episode_id}: the stored episode does not read back: {exc}")
     plan, goal, options, model_id = _stored_plan(store, stored.plan_run_id)
     parameters = _episode_parameters(store, episode_id)
     drift_m = parameters.get("drift_m")
     workers = parameters.get("workers")
     if not isinstance(drift_m, float) or not 0 < drift_m <= 1 or not isinstance(workers, int) or workers < 1:
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    # an episode stored before straightening existed ran without it
+    # an episode stored before straightening (stages) existed ran without it
     straighten = parameters.get("straighten", False)
-    if not isinstance(straighten, bool):
+    stages = parameters.get("stages", False)
+    if not isinstance(straighten, bool) or not isinstance(stages, bool):
         fail(f"--resume {episode_id}: its stored parameters do not read back ({parameters!r:.120})")
-    settings = EpisodeSettings(stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, straighten)
+    settings = EpisodeSettings(
+        stored.closed_loop, stored.timeout_s, stored.max_actions, drift_m, straighten, stages
+    )
+    try:
+        level = Level.from_dict(stored.level_ranges)
+        world = SimWorld(level, stored.world_seed)
+        state, checkpoint = resume_state(store, stored.steps, goal if stages else None)
+        world.restore(checkpoint)
+    except (LevelError, PlanInputError, ValueError, KeyError, TypeError) as exc:
+        fail(f"--resume {episode_id}: the stored episode does not read back: {exc}")
     reopen_episode(store, episode_id)
     stop = StopSignals()
     with stop.installed():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -23,10 +24,13 @@ from twisted.experiments.episodes import (
     EpisodeSettings,
     ModelPlanner,
     Replan,
+    first_summand_goal,
     plan_of_run,
     resume_state,
+    summand_cinched,
 )
 from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table
+from twisted.goals import PlanInputError, knot_goal
 from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
@@ -133,9 +137,9 @@ class SeenByPlanner(ModelPlanner):
 
     given: list[tuple[Any, ...]]
 
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
+    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None, staged: bool = False) -> Any:
         self.given.append((points, seed, timeout_s, like))
-        return super().replan(points, seed, timeout_s, like)
+        return super().replan(points, seed, timeout_s, like, staged)
 
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
@@ -211,11 +215,11 @@ class RejectsFits(ModelPlanner):
 
     rejects: int
 
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None) -> Any:
+    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None, staged: bool = False) -> Any:
         if self.rejects > 0:
             self.rejects -= 1
             return Replan(None, None, 0.0, 0.01, FIT_REJECTED, unfitted=True)
-        return super().replan(points, seed, timeout_s, like)
+        return super().replan(points, seed, timeout_s, like, staged)
 
 
 @pytest.mark.parametrize("rejects", [1, 99])
@@ -373,6 +377,94 @@ def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
         assert all(a != b for a, b in zip(moved, moved[1:], strict=False)), kinds
     else:  # a rope that pulls to a knot is not pulled again: it stays knotted
         assert pulled.knot == "3_1+" and pulled.observed_key != "[]" and not resumed.may_straighten
+
+
+@pytest.mark.parametrize(
+    ("knot", "first"),
+    [("granny", "3_1"), ("granny+", "3_1+"), ("square", "3_1"), ("3_1-#4_1", "3_1-"), ("overhand", None)],
+)
+def test_a_composite_knot_is_tied_in_stages_its_first_summand_first(knot: str, first: str | None) -> None:
+    stage = first_summand_goal(knot_goal(knot))
+    assert (stage and stage.knot) == first
+    if stage is not None:  # the stage's states are the summand's: granny's and square's either chirality
+        assert stage == knot_goal(first) and {p.cross for p in stage.states} == {3}
+    assert first_summand_goal(knot_goal("5_2")) is None
+
+
+class RecordsGoals(ModelPlanner):
+    """The model planner whose searches record the goal they were asked for and search nothing."""
+
+    goals: list[str]
+
+    def search(self, start: Any, seed: int, timeout_s: float, goal: Any = None) -> tuple[int, bool]:
+        self.goals.append((goal or self.goal).spec)
+        raise PlanInputError("recorded, not searched")
+
+
+def test_a_staged_replan_aims_at_the_first_summand_until_the_rope_ties_one(planned: tuple[str, int]) -> None:
+    db, run_id = planned
+    store, _, options, plan = _parts(db, run_id)
+    granny = knot_goal("granny")
+    planner = RecordsGoals(store, granny, options, None, 1, _episode_row(store, "none", 0, plan, True))
+    planner.goals = []
+    bent = plan.steps[-1].points  # a rope of one crossing: it ties no overhand
+    try:
+        for staged in (True, False):
+            assert planner.replan(bent, 1, 5.0, None, staged).run_id is None
+    finally:
+        planner.close()
+        store.close()
+    assert planner.goals == [knot_goal("3_1").spec, granny.spec]
+    # a rope that ties an overhand aims at the granny (its search cinches the overhand first)
+    overhand = knot_goal("3_1+").states[0]
+    assert planner.goal_for(overhand, True) == granny != planner.goal_for(plan.steps[-1].p_data, True)
+    assert planner.goal_for(None, True) == granny
+
+
+class TiesASummand(RecordsGoals):
+    """Sees a summand tied in every rope (what a rope the world left tying an overhand would show)."""
+
+    def ties_summand(self, p_data: Any) -> bool:
+        return True
+
+
+def test_a_rope_that_ties_a_summand_is_cinched_in_the_world_before_the_replan(
+    planned: tuple[str, int],
+) -> None:
+    db, run_id = planned
+    store, _, options, plan = _parts(db, run_id)
+    granny = knot_goal("granny")
+    episode_id = _episode_row(store, "none", 0, plan, True)
+    world = Spy(SimWorld(LEVELS["none"], 0))
+    planner = TiesASummand(store, granny, options, None, 1, episode_id)
+    planner.goals = []
+    try:
+        episode = Episode(store, episode_id, world, granny, planner, EpisodeSettings(True, 20.0, 4))
+        state = episode.begin(plan)
+        state.plan = None  # off plan: the next thing is a replan
+        result = episode.run(state)
+        kinds = [s.kind for s in load_episode(store, episode_id).steps]
+    finally:
+        planner.close()
+        store.close()
+    # cinched once, in the world, then planned for the whole knot (the search records it and stops)
+    assert kinds == ["reset", "cinch", "replan"] and "cinch" in world.used, kinds
+    assert planner.goals == [granny.spec] and result.outcome == "lost" and result.actions == 1
+
+
+def test_a_resumed_episode_knows_whether_its_summand_was_cinched() -> None:
+    summands = frozenset({"3_1+", "3_1-"})
+    tied, untied = knot_goal("3_1+").states[0].key, "[]"
+
+    def step(kind: str, key: str, knot: str | None = None) -> Any:
+        return SimpleNamespace(kind=kind, observed_key=key, knot=knot)
+
+    assert not summand_cinched([step("reset", untied), step("curve", tied)], summands)
+    assert summand_cinched([step("curve", tied), step("cinch", tied), step("curve", tied)], summands)
+    assert not summand_cinched([step("cinch", tied), step("curve", untied), step("curve", tied)], summands)
+    assert summand_cinched([step("curve", tied), step("straighten", tied, "3_1+")], summands)
+    assert not summand_cinched([step("curve", tied), step("straighten", untied, "0_1")], summands)
+    assert not summand_cinched([step("cinch", tied)], frozenset())  # a goal with no stages
 
 
 def test_an_interrupted_episode_resumes_from_its_last_observation(planned: tuple[str, int]) -> None:

@@ -29,7 +29,7 @@ import numpy.typing as npt
 
 from twisted.goals import Goal, PlanInputError
 from twisted.runtime import StopSignals
-from twisted.topology import PData, PDataError, top
+from twisted.topology import PData, PDataError, parse_p_data, top
 
 if TYPE_CHECKING:
     from twisted.world.protocol import PullVerdict
@@ -129,16 +129,35 @@ class ModelPlanner:
         self.workers, self.episode_run_id, self.stop = workers, episode_run_id, stop
         self._resources = SearchResources()
         self._fit: Any = None
+        # a composite knot goal's first stage (None: the goal has none) and the summands that end it
+        self.first_stage = first_summand_goal(goal)
+        self.summands = summands_of(goal)
 
     def close(self) -> None:
         self._resources.close()
 
-    def search(self, start_configuration_id: int | None, seed: int, timeout_s: float) -> tuple[int, bool]:
-        """One search of the goal from a stored configuration (None: the straight rope); (run id, solved)."""
+    def ties_summand(self, p_data: PData | None) -> bool:
+        """Whether a rope in ``p_data`` ties one of a staged goal's summands (both closures, whatever its
+        crossings); False for a goal with no stages."""
+        return _ties_any(self.summands, p_data)
+
+    def goal_for(self, p_data: PData | None, staged: bool) -> Goal:
+        """The goal a search from a rope in ``p_data`` aims at: with ``staged``, toward a composite knot,
+        the first summand's goal while the rope ties none of the summands (:func:`first_summand_goal`),
+        else the goal itself (the search cinches the summand tied: DESIGN 8)."""
+        if not staged or self.first_stage is None or p_data is None or self.ties_summand(p_data):
+            return self.goal
+        return self.first_stage
+
+    def search(
+        self, start_configuration_id: int | None, seed: int, timeout_s: float, goal: Goal | None = None
+    ) -> tuple[int, bool]:
+        """One search of ``goal`` (None: the episode's) from a stored configuration (None: the straight
+        rope); (run id, solved)."""
         from twisted.planner import SearchRequest, run_search
 
         request = SearchRequest(
-            goal=self.goal.spec,
+            goal=(goal or self.goal).spec,
             options={**self.options.to_dict(), "seed": seed},
             start_config=start_configuration_id,
             model_id=self.model_id,
@@ -152,10 +171,16 @@ class ModelPlanner:
         return int(result.run_id), bool(result.solved)
 
     def replan(
-        self, points: FloatArray, seed: int, timeout_s: float, like: FloatArray | None = None
+        self,
+        points: FloatArray,
+        seed: int,
+        timeout_s: float,
+        like: FloatArray | None = None,
+        staged: bool = False,
     ) -> Replan:
         """Fit the model's chain to observed ``points`` (near ``like``, the model's expectation of them,
-        when given), let it rest in the model, store it as a configuration and search from there."""
+        when given), let it rest in the model, store it as a configuration and search from there (for
+        :meth:`goal_for` the fit at rest)."""
         from twisted.store.queries import add_configuration
         from twisted.world import ChainFit
 
@@ -181,7 +206,7 @@ class ModelPlanner:
             configuration_id = int(configuration.id)
         remaining = max(timeout_s - (time.perf_counter() - started), 1.0)
         try:
-            run_id, solved = self.search(configuration_id, seed, remaining)
+            run_id, solved = self.search(configuration_id, seed, remaining, self.goal_for(p_data, staged))
         except PlanInputError as exc:
             return Replan(None, None, time.perf_counter() - started, fit.residual_m, str(exc))
         plan = plan_of_run(self.store, run_id) if solved else None
@@ -196,6 +221,8 @@ class EpisodeSettings:
     drift_m: float = DEFAULT_DRIFT_M
     # closed loop: a rope in a dead end for the goal is pulled straight before the replan (DESIGN 15.4)
     straighten: bool = True
+    # closed loop, a composite knot goal: replans aim at the first summand until the rope ties one
+    stages: bool = True
 
 
 @dataclass
@@ -214,7 +241,10 @@ class EpisodeState:
     looks: int = 0  # observations taken again in a row because the last one could not be fitted
     fit_in_goal: bool = False  # the last replan found the observation's fit in the goal: pull next
     straightens: int = 0  # the rope pulled straight because it was in a dead end for the goal
-    may_straighten: bool = True  # False once a straightening pull read a knot, or could not be done
+    # False once a straightening pull read a knot (a staged goal: other than a summand), or could not be done
+    may_straighten: bool = True
+    # staged (a composite goal): the rope was pulled tight since it last tied no summand (DESIGN 15.4)
+    cinched: bool = False
     # the last step pulled the rope straight: it is planned from as it lies, even if still in a dead end
     # (a rope pulled straight with a crossing left in it, a twist or an end lying across, is not pulled again)
     just_straightened: bool = False
@@ -270,6 +300,47 @@ def ties_goal(goal: Goal, p_data: PData) -> bool:
     from twisted.knots import identify
 
     return goal.tightened_ties(identify(p_data).name)
+
+
+def first_summand_goal(goal: Goal) -> Goal | None:
+    """The goal of a composite knot goal's first stage (docs/DESIGN.md section 15.4): the summand of
+    fewest crossings, in every chirality the goal's types hold it (granny and square: the overhand, either
+    chirality; granny+: 3_1+; 3_1#4_1: the overhand, either chirality). None for a prime knot or a state
+    goal."""
+    from twisted.goals import knot_goal
+    from twisted.knots import crossing_number, resolve_knot
+
+    types = goal.knot_types if goal.knot is not None else frozenset()
+    if not types or not all("#" in t for t in types):
+        return None
+    firsts: set[str] = set()
+    for t in types:
+        parts = t.split("#")
+        least = min(crossing_number(part) for part in parts)
+        firsts.update(part for part in parts if crossing_number(part) == least)
+    bases = {part.rstrip("+-") for part in firsts}
+    if len(bases) == 1 and resolve_knot(next(iter(bases))) == firsts:
+        name = bases.pop()
+    elif len(firsts) == 1:
+        name = firsts.pop()
+    else:  # summands of different knots with no one name for them: no stages
+        return None
+    return knot_goal(name)
+
+
+def summands_of(goal: Goal) -> frozenset[str]:
+    """The summands of a goal tied in stages (:func:`first_summand_goal`); empty for any other goal."""
+    if first_summand_goal(goal) is None:
+        return frozenset()
+    return frozenset(part for t in goal.knot_types for part in t.split("#"))
+
+
+def _ties_any(summands: frozenset[str], p_data: PData | None) -> bool:
+    if not summands or p_data is None:
+        return False
+    from twisted.knots import identify
+
+    return identify(p_data).name in summands
 
 
 def _drift(points: FloatArray, step: PlanStep) -> float:
@@ -378,6 +449,9 @@ class Episode:
                 state.plan = None
                 continue
             if plan_done or state.plan is None:
+                if self._staged() and not state.cinched and self.planner.ties_summand(observed):
+                    self._cinch(state)
+                    continue
                 if self._dead_end(state, observed):
                     straightened = self._straighten(state)
                     if self.goal.knot is not None and self.goal.tightened_ties(straightened):
@@ -411,17 +485,47 @@ class Episode:
         )
         return verdict
 
+    def _staged(self) -> bool:
+        """Whether this episode ties its goal in stages (closed loop, ``stages``, a composite knot)."""
+        return self.settings.closed_loop and self.settings.stages and self.planner.first_stage is not None
+
+    def _cinch(self, state: EpisodeState) -> None:
+        """A staged goal's rope that ties a summand is pulled tight and let go (the world's cinch, as a
+        plan's cinch step) before the replan for the whole knot starts from it (DESIGN 15.4)."""
+        seen = self.world.cinch()
+        state.actions += 1
+        state.just_straightened = False
+        state.points = seen.points
+        state.expected_q = None  # a rope the model did not make: the fit takes the least bent roll
+        observed = _observed(seen.points)
+        state.cinched = self.planner.ties_summand(observed)
+        self.progress(
+            f"action {state.actions}: cinch the first summand -> {observed.key if observed else '?'}"
+            + ("" if state.cinched else " (no summand left)")
+        )
+        self._record(
+            state,
+            "cinch",
+            **self._observation(seen.points),
+            fault=seen.fault,
+            world_checkpoint=self.world.checkpoint(),
+            plan_run_id=None,
+            plan_step=None,
+        )
+
     def _dead_end(self, state: EpisodeState, observed: PData | None) -> bool:
         """Whether the observed rope (``observed``: its P-data) has crossings from which adding crossings
-        never reaches a goal state (more than the goal's, or one no goal state has), so that a replan would
-        have to remove them in a rope the world has bent: then it is pulled straight first (closed loop,
-        ``straighten``)."""
+        never reaches a state of the goal its replan would aim at (more than the goal's, or one no goal
+        state has; :meth:`ModelPlanner.goal_for`), so that a replan would have to remove them in a rope the
+        world has bent: then it is pulled straight first (closed loop, ``straighten``)."""
         from twisted.planner.both_ways import both_ways_needed
 
         wanted = self.settings.closed_loop and self.settings.straighten
         if not wanted or not state.may_straighten or state.just_straightened:
             return False
-        return observed is not None and observed.cross > 0 and both_ways_needed(observed, self.goal)
+        if observed is None or observed.cross == 0:
+            return False
+        return both_ways_needed(observed, self.planner.goal_for(observed, self._staged()))
 
     def _straighten(self, state: EpisodeState) -> str | None:
         """Pull the world's rope straight by both ends (the pull test's act: DESIGN 15.4) and observe it;
@@ -431,14 +535,17 @@ class Episode:
         state.just_straightened = True
         if verdict.knot is not None:  # pulled: the model made no rope like it; the fit takes the least bent
             state.expected_q = None  # (a pull the world could not do leaves the rope and the expectation)
-        # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is
-        state.may_straighten = verdict.knot == UNKNOT
+        # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is; a staged
+        # goal's rope that pulls to a summand is the rope its second stage starts from: pulled tight
+        summand = self._staged() and verdict.knot in self.planner.summands
+        state.may_straighten = verdict.knot == UNKNOT or summand
+        state.cinched = summand
         return verdict.knot
 
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q)
+        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q, self._staged())
         state.replans += 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
@@ -494,6 +601,8 @@ class Episode:
         state.points = seen.points
         drift = _drift(seen.points, step)
         observed = _observed(seen.points)
+        tied = self.planner.ties_summand(observed)
+        state.cinched = tied and (step.curve is None or state.cinched)
         off_plan = seen.fault is not None or observed != step.p_data or drift > self.settings.drift_m
         if off_plan and self.settings.closed_loop:
             state.plan = None
@@ -534,6 +643,7 @@ def run_episode(
     parameters = {
         "drift_m": settings.drift_m,
         "straighten": settings.straighten,
+        "stages": settings.stages,
         "workers": planner.workers,
         "level": level.to_dict(),
     }
@@ -574,16 +684,35 @@ def _straightened_last(steps: Sequence[Any]) -> bool:
     return bool(moved) and moved[-1] == "straighten"
 
 
-def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[str, Any]]:
+def summand_cinched(steps: Sequence[Any], summands: frozenset[str]) -> bool:
+    """Whether a staged episode's rope was pulled tight (a cinch, or a pull that read a summand) since it
+    last was seen tying no summand (:attr:`EpisodeState.cinched`)."""
+    cinched = False
+    for step in steps if summands else ():
+        if step.observed_key is None:
+            continue
+        tied = _ties_any(summands, parse_p_data(step.observed_key))
+        if step.kind == "cinch" or (step.kind == "straighten" and step.knot in summands):
+            cinched = tied
+        else:
+            cinched = cinched and tied
+    return cinched
+
+
+def resume_state(
+    store: Any, steps: Sequence[Any], goal: Goal | None = None
+) -> tuple[EpisodeState, dict[str, Any]]:
     """Where a stopped episode stood after its last stored step, and the world's checkpoint to restore.
 
     The observation is the last one stored; the plan the last step named (None: the next thing is a
-    replan). Raises PlanInputError when the steps hold no observation with a world checkpoint."""
+    replan); ``goal``, the episode's, tells whether its rope holds a cinched summand (a staged goal).
+    Raises PlanInputError when the steps hold no observation with a world checkpoint."""
     seen = [s for s in steps if s.points is not None and s.world_checkpoint is not None]
     if not seen:
         raise PlanInputError("the episode stored no observation to resume from")
     last_seen = seen[-1]
     last = steps[-1]
+    summands = frozenset() if goal is None else summands_of(goal)
     plan = None
     position = 0
     if last.plan_run_id is not None:
@@ -604,7 +733,8 @@ def resume_state(store: Any, steps: Sequence[Any]) -> tuple[EpisodeState, dict[s
         replan_runs=[int(s.replan_run_id) for s in steps if s.replan_run_id is not None],
         pulls=sum(1 for s in steps if s.kind == "pull_test"),
         straightens=sum(1 for s in steps if s.kind == "straighten"),
-        may_straighten=all(s.knot == UNKNOT for s in steps if s.kind == "straighten"),
+        may_straighten=all(s.knot == UNKNOT or s.knot in summands for s in steps if s.kind == "straighten"),
+        cinched=summand_cinched(steps, summands),
         just_straightened=_straightened_last(steps),
         fit_in_goal=last.kind == "replan" and last.fault == FIT_IN_GOAL,
         looks=_trailing_looks(steps),
