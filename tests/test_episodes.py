@@ -29,7 +29,7 @@ from twisted.experiments.episodes import (
     resume_state,
     summand_cinched,
 )
-from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table
+from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table, settings_label
 from twisted.goals import PlanInputError, knot_goal
 from twisted.planner import stored_options
 from twisted.store import open_store
@@ -510,16 +510,33 @@ def test_report_tables_and_plots_the_episodes_by_level(planned: tuple[str, int],
         code, out = _execute(db, str(run_id), "--world", level, "--seed", "11", "--json")
         assert code in (0, 3), out
     with open_store(db) as store:
-        table = {(r.level, r.closed_loop): r for r in robustness_table(store)}
+        # grouped by how the episodes ran too: this module's store holds several budgets
+        table = {(r.level, r.closed_loop, r.settings): r for r in robustness_table(store)}
         finished = [o for o in load_levels(store) if o[1] in FINISHED]
-    assert {("none", False), ("strong", False)} <= set(table)
+    assert {("none", False, "600 s, 30 actions"), ("strong", False, "600 s, 30 actions")} <= set(table)
     assert sum(r.episodes for r in table.values()) == len(finished)
-    assert table[("none", False)].tied >= 1  # the model's own rope ties what the model planned
+    assert table[("none", False, "600 s, 30 actions")].tied >= 1  # the model's own rope ties its plan
     result = runner.invoke(app, ["--db", db, "report", "--out", str(tmp_path / "report")])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "report" / "robustness.png").stat().st_size > 0
     text = (tmp_path / "report" / "report.md").read_text()
-    assert "## Robustness" in text and "| 0_1 | none | open |" in text
+    assert "## Robustness" in text and "| 0_1 | none | open | 600 s, 30 actions |" in text
+
+
+def test_episodes_that_ran_with_other_settings_are_told_apart() -> None:
+    closed = {"drift_m": 0.05, "straighten": True, "stages": True}
+    assert settings_label("granny", True, 180.0, 100, closed) == "180 s, 100 actions"
+    assert settings_label("granny", False, 600.0, 30, None) == "600 s, 30 actions"
+    # stored before an option existed: it ran without it (stages only matter for a composite knot)
+    before = {"drift_m": 0.05, "straighten": True}
+    assert settings_label("granny", True, 180.0, 100, before) == "180 s, 100 actions, no stages"
+    assert settings_label("overhand", True, 180.0, 100, before) == "180 s, 100 actions"
+    odd = {"drift_m": 0.02, "straighten": False, "stages": "yes"}  # read back from the store as it is
+    assert (
+        settings_label("square", True, 60.0, 5, odd)
+        == "60 s, 5 actions, drift 0.02 m, no pulls straight, no stages"
+    )
+    assert settings_label(ONE_CROSSING, True, 60.0, 5, closed) == "60 s, 5 actions"
 
 
 def load_levels(store: Any) -> list[tuple[str, str]]:

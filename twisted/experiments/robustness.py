@@ -4,9 +4,11 @@
 run of the same knot and options in the store is reused), then runs one episode per (level, world seed,
 loop) (:func:`twisted.experiments.episodes.run_episode`), skipping those the store already holds finished,
 so that running it again continues. ``robustness_table`` reads every finished episode back, grouped by
-knot, level and loop: episodes, tied, the success rate, and per success the actions, replans, planning
-seconds and wall seconds. ``plot_robustness`` draws the success rate against the level (docs/DESIGN.md
-section 15.7); ``twisted report`` writes both when the store holds episodes.
+knot, level, loop and settings (:func:`settings_label`: the budget, and what a closed loop had switched
+off; a store whose episodes ran with other settings shows them apart): episodes, tied, the success rate,
+and per success the actions, replans, planning seconds and wall seconds. A finished episode is skipped
+only when it ran with the settings asked for. ``plot_robustness`` draws the success rate against the
+level (docs/DESIGN.md section 15.7); ``twisted report`` writes both when the store holds episodes.
 """
 
 from __future__ import annotations
@@ -27,9 +29,38 @@ LEVEL_ORDER = ("none", "mild", "moderate", "strong")
 FINISHED = ("tied", "not_tied", "unpulled", "out_of_budget", "lost")
 
 
+def _composite(knot: str) -> bool:
+    from twisted.knots import KnotNameError, resolve_knot
+
+    try:
+        return any("#" in t for t in resolve_knot(knot))
+    except KnotNameError:  # a state goal's label: no summands
+        return False
+
+
+def settings_label(knot: str, closed_loop: bool, timeout_s: float, max_actions: int, parameters: Any) -> str:
+    """How a group's episodes ran, as the table names it: the budget, and for a closed loop what differs
+    from today's defaults (a drift other than the default; no pulls straight; a composite knot not tied
+    in stages: DESIGN 15.4). ``parameters``: the episode run's stored parameters, as read back (an
+    episode stored before an option existed ran without it)."""
+    from twisted.experiments.episodes import DEFAULT_DRIFT_M
+
+    parts = [f"{timeout_s:g} s", f"{max_actions} actions"]
+    if closed_loop:
+        stored = parameters if isinstance(parameters, dict) else {}
+        drift = stored.get("drift_m")
+        if isinstance(drift, float) and drift != DEFAULT_DRIFT_M:
+            parts.append(f"drift {drift:g} m")
+        if stored.get("straighten") is not True:
+            parts.append("no pulls straight")
+        if stored.get("stages") is not True and _composite(knot):
+            parts.append("no stages")
+    return ", ".join(parts)
+
+
 @dataclass
 class RobustnessRow:
-    """One (knot, level, loop) group of finished episodes."""
+    """One (knot, level, loop, settings) group of finished episodes."""
 
     knot: str
     level: str
@@ -43,6 +74,7 @@ class RobustnessRow:
     median_replan_s: float | None = None  # planning time of one replan, median over every episode's replans
     # how the episodes that did not tie ended: outcome -> count (not_tied, unpulled, out_of_budget, lost)
     untied: dict[str, int] = field(default_factory=dict)
+    settings: str = ""  # how they ran (settings_label)
 
     @property
     def success(self) -> float:
@@ -62,6 +94,7 @@ class RobustnessRow:
             "wall_s_per_success": self.wall_s_per_success,
             "median_replan_s": self.median_replan_s,
             "untied": self.untied,
+            "settings": self.settings,
         }
 
 
@@ -78,64 +111,75 @@ def _level_key(level: str) -> tuple[int, str]:
 
 
 def robustness_table(store: Any) -> list[RobustnessRow]:
-    """Every finished episode, grouped by (knot, level, loop), in knot, level (none .. strong), loop order."""
+    """Every finished episode, grouped by (knot, level, loop, settings), in knot, level (none .. strong),
+    loop and settings order."""
     from twisted.store.episodes import EpisodeRow, EpisodeStep
+    from twisted.store.models import Run
 
     with store.session() as session:
         rows = session.execute(
             select(
+                EpisodeRow.run_id,
                 EpisodeRow.goal_knot,
                 EpisodeRow.level,
                 EpisodeRow.closed_loop,
+                EpisodeRow.timeout_s,
+                EpisodeRow.max_actions,
                 EpisodeRow.outcome,
                 EpisodeRow.actions,
                 EpisodeRow.replans,
                 EpisodeRow.planning_s,
                 EpisodeRow.elapsed_s,
-            ).where(EpisodeRow.outcome.in_(FINISHED))
+                Run.parameters,
+            )
+            .join(Run, Run.id == EpisodeRow.run_id)
+            .where(EpisodeRow.outcome.in_(FINISHED))
         ).all()
         replans = session.execute(
-            select(EpisodeRow.goal_knot, EpisodeRow.level, EpisodeRow.closed_loop, EpisodeStep.planning_s)
-            .join(EpisodeStep, EpisodeStep.episode_id == EpisodeRow.run_id)
+            select(EpisodeStep.episode_id, EpisodeStep.planning_s)
+            .join(EpisodeRow, EpisodeStep.episode_id == EpisodeRow.run_id)
             .where(
                 EpisodeRow.outcome.in_(FINISHED),
                 EpisodeStep.kind == "replan",
                 EpisodeStep.planning_s.is_not(None),
             )
         ).all()
-    def key(r: Any) -> tuple[str, str, bool]:
-        return (r.goal_knot, r.level, bool(r.closed_loop))
 
-    groups: dict[tuple[str, str, bool], list[Any]] = {}
+    Key = tuple[str, str, bool, str]
+    keys: dict[int, Key] = {}
+    groups: dict[Key, list[Any]] = {}
     for r in rows:
-        groups.setdefault(key(r), []).append(r)
-    replan_s: dict[tuple[str, str, bool], list[float]] = {}
+        label = settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters)
+        keys[r.run_id] = (r.goal_knot, r.level, bool(r.closed_loop), label)
+        groups.setdefault(keys[r.run_id], []).append(r)
+    replan_s: dict[Key, list[float]] = {}
     for r in replans:
-        replan_s.setdefault(key(r), []).append(float(r.planning_s))
+        replan_s.setdefault(keys[r.episode_id], []).append(float(r.planning_s))
     table = []
-    for knot, level, closed in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2])):
-        group = groups[(knot, level, closed)]
+    for k in sorted(groups, key=lambda k: (k[0], _level_key(k[1]), k[2], k[3])):
+        group = groups[k]
         tied = [r for r in group if r.outcome == "tied"]
         table.append(
             RobustnessRow(
-                knot,
-                level,
-                closed,
+                k[0],
+                k[1],
+                k[2],
                 len(group),
                 len(tied),
                 _mean([r.actions for r in tied]),
                 _mean([r.replans for r in tied]),
                 _mean([r.planning_s for r in tied]),
                 _mean([r.elapsed_s for r in tied]),
-                _median(replan_s.get((knot, level, closed), [])),
+                _median(replan_s.get(k, [])),
                 {o: n for o in FINISHED if o != "tied" and (n := sum(r.outcome == o for r in group))},
+                k[3],
             )
         )
     return table
 
 
 def plot_robustness(table: Sequence[RobustnessRow], path: Path) -> Path:
-    """Success rate against perturbation level, one line per knot and loop."""
+    """Success rate against perturbation level, one line per knot, loop and settings."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -145,16 +189,16 @@ def plot_robustness(table: Sequence[RobustnessRow], path: Path) -> Path:
 
     levels = sorted({r.level for r in table}, key=_level_key)
     fig, ax = plt.subplots(figsize=(7.0, 4.2))
-    for knot in sorted({r.knot for r in table}):
-        for closed in (False, True):
-            rows = {r.level: r for r in table if r.knot == knot and r.closed_loop == closed}
-            if not rows:
-                continue
-            xs = [i for i, level in enumerate(levels) if level in rows]
-            ys = [rows[levels[i]].success for i in xs]
-            n = sum(r.episodes for r in rows.values())
-            label = f"{knot}, {'closed' if closed else 'open'} loop ({n} episodes)"
-            ax.plot(xs, ys, marker="o", linestyle="-" if closed else "--", label=label)
+    lines = sorted({(r.knot, r.closed_loop, r.settings) for r in table})
+    several = {(knot, closed) for knot, closed, _ in lines if sum(k[:2] == (knot, closed) for k in lines) > 1}
+    for knot, closed, settings in lines:
+        rows = {r.level: r for r in table if (r.knot, r.closed_loop, r.settings) == (knot, closed, settings)}
+        xs = [i for i, level in enumerate(levels) if level in rows]
+        ys = [rows[levels[i]].success for i in xs]
+        n = sum(r.episodes for r in rows.values())
+        label = f"{knot}, {'closed' if closed else 'open'} loop ({n} episodes"
+        label += f"; {settings})" if (knot, closed) in several else ")"
+        ax.plot(xs, ys, marker="o", linestyle="-" if closed else "--", label=label)
     ax.set_xticks(range(len(levels)), levels)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("perturbation level (docs/DESIGN.md section 15.2)")
@@ -172,13 +216,15 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
         return "-" if x is None else f"{x:g}"
 
     lines = [
-        "| knot | level | loop | episodes | tied | success | actions / success | replans / success "
-        "| planning s / success | wall s / success | median s / replan | not tied: how they ended |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| knot | level | loop | settings | episodes | tied | success | actions / success "
+        "| replans / success | planning s / success | wall s / success | median s / replan "
+        "| not tied: how they ended |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table:
         lines.append(
-            f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.episodes} | {r.tied} "
+            f"| {r.knot} | {r.level} | {'closed' if r.closed_loop else 'open'} | {r.settings} | {r.episodes} "
+            f"| {r.tied} "
             f"| {r.success:.2f} | {cell(r.actions_per_success)} | {cell(r.replans_per_success)} "
             f"| {cell(r.planning_s_per_success)} | {cell(r.wall_s_per_success)} | {cell(r.median_replan_s)} "
             f"| {', '.join(f'{o} {n}' for o, n in r.untied.items()) or '-'} |"
@@ -226,17 +272,41 @@ def model_plan(
     return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
 
 
-def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool]]:
-    """(level, world seed, closed loop) of the finished episodes of a plan."""
+def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool, str]]:
+    """(level, world seed, closed loop, settings) of the finished episodes of a plan."""
     from twisted.store.episodes import EpisodeRow
+    from twisted.store.models import Run
 
     with store.session() as session:
         rows = session.execute(
-            select(EpisodeRow.level, EpisodeRow.world_seed, EpisodeRow.closed_loop).where(
-                EpisodeRow.plan_run_id == plan_run_id, EpisodeRow.outcome.in_(FINISHED)
+            select(
+                EpisodeRow.goal_knot,
+                EpisodeRow.level,
+                EpisodeRow.world_seed,
+                EpisodeRow.closed_loop,
+                EpisodeRow.timeout_s,
+                EpisodeRow.max_actions,
+                Run.parameters,
             )
+            .join(Run, Run.id == EpisodeRow.run_id)
+            .where(EpisodeRow.plan_run_id == plan_run_id, EpisodeRow.outcome.in_(FINISHED))
         ).all()
-    return {(r.level, int(r.world_seed), bool(r.closed_loop)) for r in rows}
+    return {
+        (
+            r.level,
+            int(r.world_seed),
+            bool(r.closed_loop),
+            settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters),
+        )
+        for r in rows
+    }
+
+
+def _label(goal: Any, settings: Any) -> str:
+    """:func:`settings_label` of the episodes ``settings`` would run (their stored parameters)."""
+    stored = {"drift_m": settings.drift_m, "straighten": settings.straighten, "stages": settings.stages}
+    label = goal.knot_label or goal.spec
+    return settings_label(label, settings.closed_loop, settings.timeout_s, settings.max_actions, stored)
 
 
 def run_robustness(
@@ -250,7 +320,8 @@ def run_robustness(
     stop: StopSignals,
     progress: Callable[[str], None],
 ) -> list[Any]:
-    """Every (knot, level, seed, loop) episode not yet finished in the store; the results of those run."""
+    """Every (knot, level, seed, loop) episode not yet finished in the store with ``settings``; the results
+    of those run."""
     from dataclasses import replace
 
     from twisted.experiments.episodes import ModelPlanner, run_episode
@@ -268,9 +339,9 @@ def run_robustness(
                     for closed in loops:
                         if stop():
                             return results
-                        if (level.name, seed, closed) in done:
-                            continue
                         episode = replace(settings, closed_loop=closed)
+                        if (level.name, seed, closed, _label(goal, episode)) in done:
+                            continue
                         result = run_episode(store, plan, goal, planner, level, seed, episode)
                         loop = "closed" if closed else "open"
                         progress(
