@@ -261,7 +261,15 @@ class CannotPull(Spy):
 
     def pull_test(self) -> PullVerdict:
         self.used.add("pull_test")
-        return PullVerdict(None, "deep penetration (0.0112 m > 0.01115 m)")
+        return PullVerdict(None, "deep penetration (0.0112 m > 0.01115 m)", moved=False)
+
+
+class PullsButPutsBack(Spy):
+    """A world whose pull reads no knot but whose pulled rope would not rest: it lies as it did."""
+
+    def pull_test(self) -> PullVerdict:
+        self.used.add("pull_test")
+        return PullVerdict("0_1", None, "the pulled rope did not come to rest: it lies as before", False)
 
 
 def test_a_rope_the_world_cannot_pull_ends_unpulled_not_untied(planned: tuple[str, int]) -> None:
@@ -325,7 +333,9 @@ class PullsNoStraighter(PullsAKnot):
     knot = "0_1"
 
 
-@pytest.mark.parametrize("world_kind", ["straightens", "no-straighten", "knotted", "stays", "cannot"])
+@pytest.mark.parametrize(
+    "world_kind", ["straightens", "no-straighten", "knotted", "stays", "cannot", "put-back"]
+)
 def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     planned: tuple[str, int], world_kind: str
 ) -> None:
@@ -333,7 +343,12 @@ def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     db, run_id = planned
     store, goal, options, plan = _parts(db, run_id)
     episode_id = _episode_row(store, "none", 0, plan, True)
-    kinds_of_world = {"knotted": PullsAKnot, "stays": PullsNoStraighter, "cannot": CannotPull}
+    kinds_of_world = {
+        "knotted": PullsAKnot,
+        "stays": PullsNoStraighter,
+        "cannot": CannotPull,
+        "put-back": PullsButPutsBack,
+    }
     world = kinds_of_world.get(world_kind, Spy)(SimWorld(LEVELS["none"], 0))
     planner = SeenByPlanner(store, goal, options, None, 1, episode_id)
     planner.given = []
@@ -361,12 +376,15 @@ def test_a_rope_in_a_dead_end_is_pulled_straight_before_the_replan(
     assert pulled.world_checkpoint is not None and pulled.points is not None
     assert result.straightens == resumed.straightens == kinds.count("straighten")
     assert "pull_test" in world.used
-    if world_kind != "stays":  # the rope came straight, is knotted, or could not be pulled: once
+    if world_kind not in ("stays", "put-back"):  # straight, knotted, or could not be pulled: once
         assert kinds.count("straighten") == 1
     like = planner.given[0][3]  # the model's expectation of the rope the first replan fits near
-    if world_kind == "cannot":  # the rope lies as it did: the expectation stands, and it is not pulled again
-        assert pulled.knot is None and pulled.fault and not resumed.may_straighten
-        assert like is not None and np.array_equal(like, plan.root_q)
+    if world_kind in ("cannot", "put-back"):  # the rope lies as it did: the expectation stands
+        assert like is not None and np.array_equal(like, plan.root_q) and pulled.fault
+        if world_kind == "cannot":  # and it is not pulled again
+            assert pulled.knot is None and not resumed.may_straighten
+        else:  # the pull read no knot: it may be pulled again after the next action
+            assert pulled.knot == "0_1" and resumed.may_straighten
         return
     assert like is None  # a pulled rope is one the model never made: the fit takes the least bent roll
     if world_kind == "straightens":  # no knot: the rope comes straight, and the replan starts there

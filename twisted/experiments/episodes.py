@@ -533,8 +533,8 @@ class Episode:
         verdict = self._pull(state, "straighten")
         state.straightens += 1
         state.just_straightened = True
-        if verdict.knot is not None:  # pulled: the model made no rope like it; the fit takes the least bent
-            state.expected_q = None  # (a pull the world could not do leaves the rope and the expectation)
+        if verdict.moved:  # pulled: the model made no rope like it; the fit takes the least bent roll
+            state.expected_q = None  # (a rope the pull left as it lay keeps the expectation)
         # a rope that pulls to a knot stays knotted, and one the world cannot pull stays as it is; a staged
         # goal's rope that pulls to a summand is the rope its second stage starts from: pulled tight
         summand = self._staged() and verdict.knot in self.planner.summands

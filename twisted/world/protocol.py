@@ -31,11 +31,14 @@ class Observation:
 @dataclass(frozen=True)
 class PullVerdict:
     """The world's pull test: ``knot`` names the knot of the taut rope (``knotoid`` when its closures
-    differ, None when the pull could not be done: ``reason``). The rope stays as the pull left it, let go."""
+    differ, None when the pull could not be done: ``reason``). The rope stays as the pull left it, let go;
+    ``moved`` is False when it lies as it did before the pull instead (it could not be pulled, or not come
+    to rest after it)."""
 
     knot: str | None
     reason: str | None = None
     note: str | None = None  # how the knot was read when not by the usual pull (e.g. at less tension)
+    moved: bool = True
 
 
 @runtime_checkable

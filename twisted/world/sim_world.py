@@ -131,15 +131,22 @@ class SimWorld:
             pulled = tighten(self._sim, self._state, taut_lag_m=GENTLE_PULL * TAUT_LAG_M)
         if not pulled.ok:
             self._sim.set_state(self._state)
-            return PullVerdict(None, pulled.reason if note is None else f"{pulled.reason}; {note}")
+            return PullVerdict(
+                None, pulled.reason if note is None else f"{pulled.reason}; {note}", moved=False
+            )
         # the rope stays as the pull left it: let go of both ends and let it come to rest
         self._sim.release()
         reason, _ = self._sim.settle()
         if reason is None:
             self._state = self._sim.state()
-        else:
-            self._sim.set_state(self._state)
-        return PullVerdict(pulled.knot_name, None, note)
+            return PullVerdict(pulled.knot_name, None, note)
+        # read, but the pulled rope would not rest: it is put back as it lay (the knot read stands: a pull
+        # by the ends does not change it)
+        self._sim.set_state(self._state)
+        unsettled = f"the pulled rope did not come to rest ({reason}): it lies as before"
+        return PullVerdict(
+            pulled.knot_name, None, unsettled if note is None else f"{note}; {unsettled}", moved=False
+        )
 
     def checkpoint(self) -> dict[str, Any]:
         return {
