@@ -122,6 +122,13 @@ class Goal:
         name = identify(self.states[0]).name
         return frozenset() if name == KNOTOID else frozenset({name})
 
+    @cached_property
+    def summands(self) -> frozenset[str]:
+        """The summands of the composite knot types a knot goal names (granny: 3_1+ and 3_1-); empty for
+        a prime knot, and for a state goal (it asks for one diagram, not for a knot tied in parts)."""
+        types = self.knot_types if self.knot is not None else frozenset()
+        return frozenset(part for t in types if "#" in t for part in t.split("#"))
+
     @property
     def knot_label(self) -> str | None:
         """What a pull test of this goal must tie, as stored: the knot name, else the state's knot type."""

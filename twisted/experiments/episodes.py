@@ -131,7 +131,7 @@ class ModelPlanner:
         self._fit: Any = None
         # a composite knot goal's first stage (None: the goal has none) and the summands that end it
         self.first_stage = first_summand_goal(goal)
-        self.summands = summands_of(goal)
+        self.summands = goal.summands if self.first_stage is not None else frozenset()
 
     def close(self) -> None:
         self._resources.close()
@@ -330,9 +330,7 @@ def first_summand_goal(goal: Goal) -> Goal | None:
 
 def summands_of(goal: Goal) -> frozenset[str]:
     """The summands of a goal tied in stages (:func:`first_summand_goal`); empty for any other goal."""
-    if first_summand_goal(goal) is None:
-        return frozenset()
-    return frozenset(part for t in goal.knot_types for part in t.split("#"))
+    return goal.summands if first_summand_goal(goal) is not None else frozenset()
 
 
 def _ties_any(summands: frozenset[str], p_data: PData | None) -> bool:

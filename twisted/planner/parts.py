@@ -483,8 +483,8 @@ class SummandCinch:
 
     def __init__(self, goal: Goal) -> None:
         # knot goals only: a state goal asks for one diagram, and cinching on the way there is unmeasured
-        types = goal.knot_types if getattr(goal, "knot", None) is not None else frozenset()
-        self.summands = frozenset(part for t in types if "#" in t for part in t.split("#"))
+        # (a bare P-data goal, as a part is sometimes made with, has none either)
+        self.summands: frozenset[str] = getattr(goal, "summands", frozenset())
         # a summand's crossing number ("3_1+" -> 3): a state with more crossings that ties it has one the
         # pull would take out, so only states of exactly these counts are cinched
         from twisted.knots import crossing_number
