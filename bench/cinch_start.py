@@ -1,7 +1,7 @@
 """Why the planner cinches: searches for a granny started from a loose overhand and from the same overhand
 cinched (pulled tight, let go, settled: twisted.tighten.cinch).
 
-    python bench/cinch_start.py --dir /tmp/cinch [--overhands 0-7] [--timeout 240] [--seed 0]
+    python bench/cinch_start.py --dir /tmp/cinch [--overhands 0-7] [--timeout 240] [--seed 0] [--model FILE]
 
 1. For each seed of --overhands, `twisted plan --knot overhand --workers 1` from the straight rope (one
    database, DIR/overhands.db); the rope each solved run ends in is a loose overhand.
@@ -10,7 +10,8 @@ cinched (pulled tight, let go, settled: twisted.tighten.cinch).
    `twisted plan --knot granny --tighten --start-config ID --no-cinch --workers 1 --seed S --timeout T`
    runs from each, two searches at a time (one core each; the pairs alternate loose / cinched, so both
    see the same load). --no-cinch: the search itself cinches nothing, so the two starts differ only in
-   the rope they start from.
+   the rope they start from. With --model FILE the granny searches use that model (`twisted models
+   --import FILE` into DIR/granny.db), the overhands the shipped one, so models compare on the same ropes.
 
 Prints per pair the overhand's knot, the ends' distance before and after the cinch, and each search's
 outcome, search time and simulator calls; then the medians. Deterministic given the seeds, but a
@@ -47,6 +48,7 @@ def main() -> None:
     ap.add_argument("--overhands", default="0-7", help="overhand seeds, as --seeds: 0-7, '0 3 5'")
     ap.add_argument("--timeout", type=float, default=240.0, help="search time limit of each granny search")
     ap.add_argument("--seed", type=int, default=0, help="seed of the granny searches")
+    ap.add_argument("--model", type=Path, help="model file of the granny searches (default: the shipped one)")
     args = ap.parse_args()
 
     from cli.options import parse_seeds
@@ -62,6 +64,19 @@ def main() -> None:
     for path in (overhands, granny):
         for suffix in ("", "-wal", "-shm"):
             Path(f"{path}{suffix}").unlink(missing_ok=True)
+
+    if args.model is not None:
+        cmd = [
+            sys.executable,
+            "-m",
+            "cli.main",
+            "--db",
+            f"sqlite:///{granny}",
+            "models",
+            "--import",
+            str(args.model),
+        ]
+        print(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip())
 
     ropes = []
     for seed in parse_seeds(args.overhands):
