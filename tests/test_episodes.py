@@ -137,9 +137,17 @@ class SeenByPlanner(ModelPlanner):
 
     given: list[tuple[Any, ...]]
 
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None, staged: bool = False) -> Any:
+    def replan(
+        self,
+        points: Any,
+        seed: int,
+        timeout_s: float,
+        like: Any = None,
+        staged: bool = False,
+        cinched: bool = False,
+    ) -> Any:
         self.given.append((points, seed, timeout_s, like))
-        return super().replan(points, seed, timeout_s, like, staged)
+        return super().replan(points, seed, timeout_s, like, staged, cinched)
 
 
 def _parts(db: str, run_id: int) -> tuple[Any, Any, Any, Any]:
@@ -215,11 +223,11 @@ class RejectsFits(ModelPlanner):
 
     rejects: int
 
-    def replan(self, points: Any, seed: int, timeout_s: float, like: Any = None, staged: bool = False) -> Any:
+    def replan(self, *args: Any, **kwargs: Any) -> Any:
         if self.rejects > 0:
             self.rejects -= 1
             return Replan(None, None, 0.0, 0.01, FIT_REJECTED, unfitted=True)
-        return super().replan(points, seed, timeout_s, like, staged)
+        return super().replan(*args, **kwargs)
 
 
 @pytest.mark.parametrize("rejects", [1, 99])
@@ -414,8 +422,13 @@ class RecordsGoals(ModelPlanner):
 
     goals: list[str]
 
-    def search(self, start: Any, seed: int, timeout_s: float, goal: Any = None) -> tuple[int, bool]:
+    cinched: list[bool]
+
+    def search(
+        self, start: Any, seed: int, timeout_s: float, goal: Any = None, cinched: bool = False
+    ) -> tuple[int, bool]:
         self.goals.append((goal or self.goal).spec)
+        self.cinched.append(cinched)
         raise PlanInputError("recorded, not searched")
 
 
@@ -424,7 +437,7 @@ def test_a_staged_replan_aims_at_the_first_summand_until_the_rope_ties_one(plann
     store, _, options, plan = _parts(db, run_id)
     granny = knot_goal("granny")
     planner = RecordsGoals(store, granny, options, None, 1, _episode_row(store, "none", 0, plan, True))
-    planner.goals = []
+    planner.goals, planner.cinched = [], []
     bent = plan.steps[-1].points  # a rope of one crossing: it ties no overhand
     try:
         for staged in (True, False):
@@ -432,7 +445,7 @@ def test_a_staged_replan_aims_at_the_first_summand_until_the_rope_ties_one(plann
     finally:
         planner.close()
         store.close()
-    assert planner.goals == [knot_goal("3_1").spec, granny.spec]
+    assert planner.goals == [knot_goal("3_1").spec, granny.spec] and planner.cinched == [False, False]
     # a rope that ties an overhand aims at the granny (its search cinches the overhand first)
     overhand = knot_goal("3_1+").states[0]
     assert planner.goal_for(overhand, True) == granny != planner.goal_for(plan.steps[-1].p_data, True)
@@ -455,7 +468,7 @@ def test_a_rope_that_ties_a_summand_is_cinched_in_the_world_before_the_replan(
     episode_id = _episode_row(store, "none", 0, plan, True)
     world = Spy(SimWorld(LEVELS["none"], 0))
     planner = TiesASummand(store, granny, options, None, 1, episode_id)
-    planner.goals = []
+    planner.goals, planner.cinched = [], []
     try:
         episode = Episode(store, episode_id, world, granny, planner, EpisodeSettings(True, 20.0, 4))
         state = episode.begin(plan)
@@ -465,9 +478,11 @@ def test_a_rope_that_ties_a_summand_is_cinched_in_the_world_before_the_replan(
     finally:
         planner.close()
         store.close()
-    # cinched once, in the world, then planned for the whole knot (the search records it and stops)
+    # cinched once, in the world, then planned for the whole knot (the search records it and stops),
+    # a search that cinches nothing: the world pulled the summand tight already
     assert kinds == ["reset", "cinch", "replan"] and "cinch" in world.used, kinds
     assert planner.goals == [granny.spec] and result.outcome == "lost" and result.actions == 1
+    assert planner.cinched == [True]
 
 
 def test_a_resumed_episode_knows_whether_its_summand_was_cinched() -> None:

@@ -150,15 +150,25 @@ class ModelPlanner:
         return self.first_stage
 
     def search(
-        self, start_configuration_id: int | None, seed: int, timeout_s: float, goal: Goal | None = None
+        self,
+        start_configuration_id: int | None,
+        seed: int,
+        timeout_s: float,
+        goal: Goal | None = None,
+        cinched: bool = False,
     ) -> tuple[int, bool]:
         """One search of ``goal`` (None: the episode's) from a stored configuration (None: the straight
-        rope); (run id, solved)."""
+        rope); (run id, solved). ``cinched``: the rope it starts from was pulled tight in the world since it
+        tied a summand, so the search cinches nothing (its plan would start with a second pull of a tight
+        knot, which the world now and then cannot carry out: DESIGN 15.4)."""
         from twisted.planner import SearchRequest, run_search
 
+        options = {**self.options.to_dict(), "seed": seed}
+        if cinched:
+            options["cinch"] = False
         request = SearchRequest(
             goal=(goal or self.goal).spec,
-            options={**self.options.to_dict(), "seed": seed},
+            options=options,
             start_config=start_configuration_id,
             model_id=self.model_id,
             workers=self.workers,
@@ -177,10 +187,11 @@ class ModelPlanner:
         timeout_s: float,
         like: FloatArray | None = None,
         staged: bool = False,
+        cinched: bool = False,
     ) -> Replan:
         """Fit the model's chain to observed ``points`` (near ``like``, the model's expectation of them,
         when given), let it rest in the model, store it as a configuration and search from there (for
-        :meth:`goal_for` the fit at rest)."""
+        :meth:`goal_for` the fit at rest; ``cinched``: see :meth:`search`)."""
         from twisted.store.queries import add_configuration
         from twisted.world import ChainFit
 
@@ -206,7 +217,10 @@ class ModelPlanner:
             configuration_id = int(configuration.id)
         remaining = max(timeout_s - (time.perf_counter() - started), 1.0)
         try:
-            run_id, solved = self.search(configuration_id, seed, remaining, self.goal_for(p_data, staged))
+            goal = self.goal_for(p_data, staged)
+            run_id, solved = self.search(
+                configuration_id, seed, remaining, goal, cinched and goal is self.goal
+            )
         except PlanInputError as exc:
             return Replan(None, None, time.perf_counter() - started, fit.residual_m, str(exc))
         plan = plan_of_run(self.store, run_id) if solved else None
@@ -543,7 +557,10 @@ class Episode:
     def _replan(self, state: EpisodeState, remaining_s: float) -> str | None:
         """Plan again from what was last seen; an outcome when the episode cannot go on, else None."""
         seed = int(getattr(self.planner.options, "seed", 0)) + state.replans + 1
-        replanned = self.planner.replan(state.points, seed, remaining_s, state.expected_q, self._staged())
+        staged = self._staged()
+        replanned = self.planner.replan(
+            state.points, seed, remaining_s, state.expected_q, staged, cinched=staged and state.cinched
+        )
         state.replans += 1
         state.planning_s += replanned.planning_s
         if replanned.run_id is not None:
