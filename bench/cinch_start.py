@@ -76,7 +76,10 @@ def main() -> None:
             "--import",
             str(args.model),
         ]
-        print(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip())
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
+        print(done.stdout.strip())
 
     ropes = []
     for seed in parse_seeds(args.overhands):
