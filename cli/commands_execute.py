@@ -106,6 +106,15 @@ _WORLD_OPTIONS: dict[str, tuple[Any, Any]] = {
 }
 
 
+# `tie` and `robustness`: the planner option the model's plan and every replan search with (DESIGN 8)
+_SAME_STATE = typer.Option(
+    True,
+    "--same-state/--no-same-state",
+    help="Searches keep curves whose rope stays in its parent's state (--no-same-state: only curves that "
+    "change the state, so a plan's every curve is a move).",
+)
+
+
 @dataclass(frozen=True)
 class WorldRequest:
     """What `execute` / `tie` were asked for about the world and the episode (checked: :meth:`check`)."""
@@ -341,6 +350,7 @@ def tie_command(
         ..., "--knot", help="The knot to tie (overhand, figure-eight, 5_2, granny, ...)."
     ),
     planner_seed: int = typer.Option(0, "--planner-seed", min=0, max=2**63 - 1, help="Seed of the searches."),
+    same_state: bool = _SAME_STATE,
     as_json: bool = json_option("the episode's outcome"),
     *,
     world: WorldRequest,
@@ -364,7 +374,7 @@ def tie_command(
     with stop.installed():
         try:
             plan, goal, options, planning_s = model_plan(
-                store, knot, planner_seed, world.timeout_s, world.workers, stop
+                store, knot, planner_seed, world.timeout_s, world.workers, stop, same_state
             )
         except PlanInputError as exc:
             err_console.print(str(exc), highlight=False)
@@ -397,6 +407,7 @@ def robustness_command(
         3, "--draws", min=1, max=10_000, help="World draws (seeds --seed ...) per level."
     ),
     loops: str = typer.Option("open,closed", "--loops", help="open, closed or both (open,closed)."),
+    same_state: bool = _SAME_STATE,
     as_json: bool = json_option("the table"),
     *,
     world: WorldRequest,
@@ -438,6 +449,7 @@ def robustness_command(
                 world.workers,
                 stop,
                 _progress(as_json),
+                same_state,
             )
         except PlanInputError as exc:
             err_console.print(str(exc), highlight=False)

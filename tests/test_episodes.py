@@ -570,6 +570,31 @@ def test_episodes_that_ran_with_other_settings_are_told_apart() -> None:
         == "60 s, 5 actions, drift 0.02 m, no pulls straight, no stages"
     )
     assert settings_label(ONE_CROSSING, True, 60.0, 5, closed) == "60 s, 5 actions"
+    # a plan searched with --no-same-state, open or closed loop (stored before the option: kept them)
+    moves = {**closed, "same_state": False}
+    assert (
+        settings_label("figure-eight", True, 180.0, 100, moves) == "180 s, 100 actions, no same-state curves"
+    )
+    assert (
+        settings_label("figure-eight", False, 180.0, 100, moves) == "180 s, 100 actions, no same-state curves"
+    )
+
+
+def test_an_episode_stores_whether_its_plan_kept_curves_that_keep_the_state(planned: tuple[str, int]) -> None:
+    """The episode's searches (its plan's and every replan's) run with the plan run's options: a plan searched
+    with --no-same-state gives episodes stored and tabled apart."""
+    db, _ = planned
+    args = ["--db", db, "plan", "--goal", ONE_CROSSING, "--planner", "random-low", "--workers", "1"]
+    result = runner.invoke(app, [*args, "--no-same-state", "--timeout", "120", "--json"])
+    assert result.exit_code == 0, result.output
+    code, out = _execute(db, str(json.loads(result.output)["run_id"]), "--world", "none", "--json")
+    assert code in (0, 3), out
+    with open_store(db) as store:
+        with store.session() as session:
+            stored = session.get(Run, int(json.loads(out)["episode"])).parameters
+        labels = {r.settings for r in robustness_table(store)}
+    assert stored["same_state"] is False
+    assert "600 s, 30 actions, no same-state curves" in labels and "600 s, 30 actions" in labels
 
 
 def load_levels(store: Any) -> list[tuple[str, str]]:

@@ -219,6 +219,39 @@ def test_runs_stored_before_the_retry_weight_resume_with_the_uniform_choice() ->
         planner_options({"retry_weight": 0.0})
 
 
+def test_no_same_state_keeps_only_curves_that_change_the_state_and_the_cinch(tmp_path: Path) -> None:
+    """--no-same-state (DESIGN 8): a curve whose rope stays in its parent's state does not enter T; the
+    same search with the default keeps such curves (from the straight rope most random curves do). A
+    cinch's rope keeps its state by design and enters T either way."""
+    from types import SimpleNamespace
+
+    from twisted.planner.tree import CINCH
+
+    goal = check_goal(ONE_CROSSING)
+    same: dict[bool, int] = {}
+    with open_store(_db(tmp_path)) as store, SimPool(1) as pool:
+        for keep in (True, False):
+            options = PlannerOptions(planner="random-low", seed=0, same_state=keep)
+            search = start_search(store, goal, options, pool)
+            search.run(max_iterations=40)
+            nodes = search.tree.nodes
+            assert len(nodes) > 1
+            same[keep] = sum(n.p_data == nodes[n.parent].p_data for n in nodes[1:])
+            assert store_options(store, search) == options.to_dict()
+    assert same[True] > 0 and same[False] == 0, same
+    root = search.tree.nodes[0]
+    stays = SimpleNamespace(ok=True, p_data=root.p_data, state=root.q, points=root.points)
+    assert search.add_to_tree(root, "a curve", stays, 0) is None
+    cinched = search.add_to_tree(root, CINCH, stays, 0)
+    assert cinched is not None and cinched.p_data == root.p_data
+
+
+def store_options(store: Any, search: Search) -> dict[str, Any]:
+    """The options the search's run stored (a resume reads them back)."""
+    with store.session() as session:
+        return PlannerOptions.from_dict(session.get(Run, search.run_id).parameters).to_dict()
+
+
 def test_a_run_stored_with_a_removed_option_is_refused_unless_it_had_no_effect(tmp_path: Path) -> None:
     """--state-prior was removed: a run searched with it (n0 > 0) cannot continue as another search;
     one that stored the value without effect (0, the default of its day) resumes as before."""

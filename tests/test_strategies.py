@@ -417,7 +417,8 @@ def test_every_option_is_declared_once_and_its_forms_come_from_the_declaration()
     assert list(declared) == list(PlannerOptions.__dataclass_fields__)
     defaults = PlannerOptions()
     assert defaults.to_dict() == {name: spec.default for name, spec in declared.items()}
-    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "cinch": False, "tighten": False}
+    before = {"retry_weight": 1.0, "cross_move": 0.0, "r1_room": 0.0, "cinch": False, "same_state": True}
+    before |= {"tighten": False}
     assert OPTIONS_BEFORE == before
     assert set(result_options()) == {n for n, s in declared.items() if "eval" in s.commands}
     assert "seed" not in result_options() and "k" in result_options()

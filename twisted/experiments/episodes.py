@@ -659,6 +659,7 @@ def run_episode(
         "drift_m": settings.drift_m,
         "straighten": settings.straighten,
         "stages": settings.stages,
+        "same_state": planner.options.same_state,  # the plan's and the replans' search option (DESIGN 8)
         "workers": planner.workers,
         "level": level.to_dict(),
     }

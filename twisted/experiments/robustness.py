@@ -39,13 +39,16 @@ def _composite(knot: str) -> bool:
 
 
 def settings_label(knot: str, closed_loop: bool, timeout_s: float, max_actions: int, parameters: Any) -> str:
-    """How a group's episodes ran, as the table names it: the budget, and for a closed loop what differs
-    from today's defaults (a drift other than the default; no pulls straight; a composite knot not tied
-    in stages: DESIGN 15.4). ``parameters``: the episode run's stored parameters, as read back (an
-    episode stored before an option existed ran without it)."""
+    """How a group's episodes ran, as the table names it: the budget, plans searched with
+    ``--no-same-state`` (DESIGN 8), and for a closed loop what differs from today's defaults (a drift other
+    than the default; no pulls straight; a composite knot not tied in stages: DESIGN 15.4).
+    ``parameters``: the episode run's stored parameters, as read back (an episode stored before an option
+    existed ran without it)."""
     from twisted.experiments.episodes import DEFAULT_DRIFT_M
 
     parts = [f"{timeout_s:g} s", f"{max_actions} actions"]
+    if isinstance(parameters, dict) and parameters.get("same_state") is False:
+        parts.append("no same-state curves")  # the plan (and replans) searched with --no-same-state
     if closed_loop:
         stored = parameters if isinstance(parameters, dict) else {}
         drift = stored.get("drift_m")
@@ -233,10 +236,17 @@ def robustness_markdown(table: Sequence[RobustnessRow]) -> list[str]:
 
 
 def model_plan(
-    store: Any, knot: str, seed: int, timeout_s: float, workers: int, stop: StopSignals
+    store: Any,
+    knot: str,
+    seed: int,
+    timeout_s: float,
+    workers: int,
+    stop: StopSignals,
+    same_state: bool = True,
 ) -> tuple[Any, Any, Any, float]:
-    """The knot's plan in the model from the straight rope (with the pull test): a solved run of the same
-    goal and options reused, else a new search. (plan, goal, options, planning seconds spent here)."""
+    """The knot's plan in the model from the straight rope (with the pull test; ``same_state``: the option of
+    that name, which the replans then search with too): a solved run of the same goal and options reused,
+    else a new search. (plan, goal, options, planning seconds spent here)."""
     from twisted.experiments.episodes import ModelPlanner, plan_of_run
     from twisted.planner import planner_options
     from twisted.planner.both_ways import make_any_goal
@@ -244,7 +254,7 @@ def model_plan(
     from twisted.store.search_tree import SearchRunRow
 
     goal = make_any_goal(None, knot, None)
-    options = planner_options({"tighten": True, "seed": seed})
+    options = planner_options({"tighten": True, "seed": seed, "same_state": same_state})
     wanted = options.to_dict()
     with store.session() as session:
         candidates = session.execute(
@@ -302,9 +312,11 @@ def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool, str
     }
 
 
-def _label(goal: Any, settings: Any) -> str:
-    """:func:`settings_label` of the episodes ``settings`` would run (their stored parameters)."""
+def _label(goal: Any, settings: Any, options: Any) -> str:
+    """:func:`settings_label` of the episodes ``settings`` would run with planner ``options`` (their stored
+    parameters)."""
     stored = {"drift_m": settings.drift_m, "straighten": settings.straighten, "stages": settings.stages}
+    stored["same_state"] = options.same_state
     label = goal.knot_label or goal.spec
     return settings_label(label, settings.closed_loop, settings.timeout_s, settings.max_actions, stored)
 
@@ -319,16 +331,19 @@ def run_robustness(
     workers: int,
     stop: StopSignals,
     progress: Callable[[str], None],
+    same_state: bool = True,
 ) -> list[Any]:
-    """Every (knot, level, seed, loop) episode not yet finished in the store with ``settings``; the results
-    of those run."""
+    """Every (knot, level, seed, loop) episode not yet finished in the store with ``settings`` (and planner
+    option ``same_state``, :func:`model_plan`); the results of those run."""
     from dataclasses import replace
 
     from twisted.experiments.episodes import ModelPlanner, run_episode
 
     results: list[Any] = []
     for knot in knots:
-        plan, goal, options, planning_s = model_plan(store, knot, 0, settings.timeout_s, workers, stop)
+        plan, goal, options, planning_s = model_plan(
+            store, knot, 0, settings.timeout_s, workers, stop, same_state
+        )
         progress(f"{knot}: plan run {plan.run_id} ({planning_s:.1f} s in the model)")
         done = done_episodes(store, plan.run_id)
         # one planner for the knot's episodes: the model and the simulator workers are loaded once
@@ -340,7 +355,7 @@ def run_robustness(
                         if stop():
                             return results
                         episode = replace(settings, closed_loop=closed)
-                        if (level.name, seed, closed, _label(goal, episode)) in done:
+                        if (level.name, seed, closed, _label(goal, episode, options)) in done:
                             continue
                         result = run_episode(store, plan, goal, planner, level, seed, episode)
                         loop = "closed" if closed else "open"

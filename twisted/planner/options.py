@@ -163,6 +163,15 @@ class PlannerOptions:
         before=False,
         before_in_evals=True,
     )
+    same_state: bool = option(
+        True,
+        "Keep curves whose rope stays in its parent's state (the model moving the rope to where its next "
+        "curve works); --no-same-state: only curves that change the state enter the tree (a cinch always "
+        "does), so every plan's curve is a move.",
+        commands=EVALUATED,
+        before=True,
+        before_in_evals=True,
+    )
     tighten: bool = option(
         False,
         "Success means: reached a goal state AND the rope pulled tight (both ends held, lifted a little, "

@@ -497,6 +497,8 @@ class Search:
         p_data: PData = result.p_data
         if not self.parts.growth.keeps(parent.p_data, p_data):
             return None
+        if not self.options.same_state and curve is not CINCH and p_data == parent.p_data:
+            return None  # --no-same-state: only moves enter T (a cinch keeps its state by design)
         node = self.tree.add(
             Node(
                 index=len(self.tree),
