@@ -30,7 +30,7 @@ from twisted.experiments.episodes import (
     summand_cinched,
 )
 from twisted.experiments.robustness import FINISHED, robustness_markdown, robustness_table, settings_label
-from twisted.goals import PlanInputError, knot_goal
+from twisted.goals import PlanInputError, check_goal, knot_goal, state_goal
 from twisted.planner import stored_options
 from twisted.store import open_store
 from twisted.store.episodes import EpisodeRow, EpisodeStep, load_episode
@@ -583,10 +583,11 @@ def test_episodes_that_ran_with_other_settings_are_told_apart() -> None:
 def test_an_episode_stores_whether_its_plan_kept_curves_that_keep_the_state(planned: tuple[str, int]) -> None:
     """The episode's searches (its plan's and every replan's) run with the plan run's options: a plan searched
     with --no-same-state gives episodes stored and tabled apart."""
-    db, _ = planned
+    db, kept = planned
     args = ["--db", db, "plan", "--goal", ONE_CROSSING, "--planner", "random-low", "--workers", "1"]
     result = runner.invoke(app, [*args, "--no-same-state", "--timeout", "120", "--json"])
     assert result.exit_code == 0, result.output
+    assert _execute(db, str(kept), "--world", "none")[0] in (0, 3)
     code, out = _execute(db, str(json.loads(result.output)["run_id"]), "--world", "none", "--json")
     assert code in (0, 3), out
     with open_store(db) as store:
@@ -595,6 +596,29 @@ def test_an_episode_stores_whether_its_plan_kept_curves_that_keep_the_state(plan
         labels = {r.settings for r in robustness_table(store)}
     assert stored["same_state"] is False
     assert "600 s, 30 actions, no same-state curves" in labels and "600 s, 30 actions" in labels
+
+
+def test_robustness_skips_only_the_episodes_finished_with_the_settings_asked_for(
+    planned: tuple[str, int],
+) -> None:
+    """What `twisted robustness` skips when run again (``done_episodes``) is keyed by the label the table
+    shows: an episode with another budget or another planner option (--no-same-state) is not skipped."""
+    from dataclasses import replace
+
+    from twisted.experiments.robustness import _label, done_episodes
+
+    db, run_id = planned
+    code, out = _execute(db, str(run_id), "--world", "mild", "--seed", "5", "--json")
+    assert code in (0, 3), out
+    goal = state_goal(check_goal(ONE_CROSSING))
+    with open_store(db) as store:
+        done = done_episodes(store, run_id)
+        with store.session() as session:
+            options = stored_options(session.get(Run, run_id).parameters, run_id)
+    asked = EpisodeSettings(False, 600.0, 30)
+    assert ("mild", 5, False, _label(goal, asked, options)) in done
+    assert ("mild", 5, False, _label(goal, replace(asked, timeout_s=180.0), options)) not in done
+    assert ("mild", 5, False, _label(goal, asked, replace(options, same_state=False))) not in done
 
 
 def load_levels(store: Any) -> list[tuple[str, str]]:

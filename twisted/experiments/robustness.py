@@ -117,27 +117,9 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
     """Every finished episode, grouped by (knot, level, loop, settings), in knot, level (none .. strong),
     loop and settings order."""
     from twisted.store.episodes import EpisodeRow, EpisodeStep
-    from twisted.store.models import Run
 
     with store.session() as session:
-        rows = session.execute(
-            select(
-                EpisodeRow.run_id,
-                EpisodeRow.goal_knot,
-                EpisodeRow.level,
-                EpisodeRow.closed_loop,
-                EpisodeRow.timeout_s,
-                EpisodeRow.max_actions,
-                EpisodeRow.outcome,
-                EpisodeRow.actions,
-                EpisodeRow.replans,
-                EpisodeRow.planning_s,
-                EpisodeRow.elapsed_s,
-                Run.parameters,
-            )
-            .join(Run, Run.id == EpisodeRow.run_id)
-            .where(EpisodeRow.outcome.in_(FINISHED))
-        ).all()
+        rows = finished_episodes(session)
         replans = session.execute(
             select(EpisodeStep.episode_id, EpisodeStep.planning_s)
             .join(EpisodeRow, EpisodeStep.episode_id == EpisodeRow.run_id)
@@ -151,8 +133,7 @@ def robustness_table(store: Any) -> list[RobustnessRow]:
     Key = tuple[str, str, bool, str]
     keys: dict[int, Key] = {}
     groups: dict[Key, list[Any]] = {}
-    for r in rows:
-        label = settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters)
+    for r, label in rows:
         keys[r.run_id] = (r.goal_knot, r.level, bool(r.closed_loop), label)
         groups.setdefault(keys[r.run_id], []).append(r)
     replan_s: dict[Key, list[float]] = {}
@@ -282,34 +263,45 @@ def model_plan(
     return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
 
 
-def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool, str]]:
-    """(level, world seed, closed loop, settings) of the finished episodes of a plan."""
+def finished_episodes(session: Any, *where: Any) -> list[tuple[Any, str]]:
+    """The finished episodes (those ``where`` keeps, every one without), each with its
+    :func:`settings_label`: one query for the table and for what :func:`run_robustness` skips."""
     from twisted.store.episodes import EpisodeRow
     from twisted.store.models import Run
 
-    with store.session() as session:
-        rows = session.execute(
-            select(
-                EpisodeRow.goal_knot,
-                EpisodeRow.level,
-                EpisodeRow.world_seed,
-                EpisodeRow.closed_loop,
-                EpisodeRow.timeout_s,
-                EpisodeRow.max_actions,
-                Run.parameters,
-            )
-            .join(Run, Run.id == EpisodeRow.run_id)
-            .where(EpisodeRow.plan_run_id == plan_run_id, EpisodeRow.outcome.in_(FINISHED))
-        ).all()
-    return {
-        (
-            r.level,
-            int(r.world_seed),
-            bool(r.closed_loop),
-            settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters),
+    rows = session.execute(
+        select(
+            EpisodeRow.run_id,
+            EpisodeRow.goal_knot,
+            EpisodeRow.level,
+            EpisodeRow.world_seed,
+            EpisodeRow.closed_loop,
+            EpisodeRow.timeout_s,
+            EpisodeRow.max_actions,
+            EpisodeRow.outcome,
+            EpisodeRow.actions,
+            EpisodeRow.replans,
+            EpisodeRow.planning_s,
+            EpisodeRow.elapsed_s,
+            Run.parameters,
         )
+        .join(Run, Run.id == EpisodeRow.run_id)
+        .where(EpisodeRow.outcome.in_(FINISHED), *where)
+    ).all()
+    labels = [
+        settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters)
         for r in rows
-    }
+    ]
+    return list(zip(rows, labels, strict=True))
+
+
+def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool, str]]:
+    """(level, world seed, closed loop, settings) of the finished episodes of a plan."""
+    from twisted.store.episodes import EpisodeRow
+
+    with store.session() as session:
+        rows = finished_episodes(session, EpisodeRow.plan_run_id == plan_run_id)
+    return {(r.level, int(r.world_seed), bool(r.closed_loop), label) for r, label in rows}
 
 
 def _label(goal: Any, settings: Any, options: Any) -> str:
