@@ -621,6 +621,20 @@ def test_robustness_skips_only_the_episodes_finished_with_the_settings_asked_for
     assert ("mild", 5, False, _label(goal, asked, replace(options, same_state=False))) not in done
 
 
+def test_a_model_plan_stored_before_an_option_is_reused_where_it_ran_as_asked() -> None:
+    """`tie` / `robustness` reuse a solved model plan of the same options; a run stored before an option
+    existed ran with its value from before (same_state: kept; cinch: off)."""
+    from twisted.experiments.robustness import same_options
+    from twisted.planner import planner_options
+
+    wanted = planner_options({"tighten": True, "seed": 0}).to_dict()
+    older = {k: v for k, v in wanted.items() if k != "same_state"}
+    assert same_options(older, wanted)
+    assert not same_options(older, {**wanted, "same_state": False})
+    assert not same_options({k: v for k, v in older.items() if k != "cinch"}, wanted)  # ran without it
+    assert not same_options({**wanted, "seed": 1}, wanted) and not same_options(None, wanted)
+
+
 def load_levels(store: Any) -> list[tuple[str, str]]:
     with store.session() as session:
         return [(r.level, r.outcome) for r in session.execute(select(EpisodeRow.level, EpisodeRow.outcome))]

@@ -249,8 +249,11 @@ def model_plan(
             .order_by(SearchRunRow.run_id)
         ).all()
     for run_id, parameters in candidates:
-        same = isinstance(parameters, dict) and all(parameters.get(k) == v for k, v in wanted.items())
-        if same and not parameters.get("episode") and not parameters.get("both_ways"):
+        if (
+            same_options(parameters, wanted)
+            and not parameters.get("episode")
+            and not parameters.get("both_ways")
+        ):
             return plan_of_run(store, run_id), goal, options, 0.0
     planner = ModelPlanner(store, goal, options, None, workers, None, stop)
     started = time.perf_counter()
@@ -261,6 +264,17 @@ def model_plan(
     if not solved:
         raise PlanInputError(f"the model found no plan for {knot} in {timeout_s:g} s (run {run_id})")
     return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
+
+
+def same_options(parameters: Any, wanted: dict[str, Any]) -> bool:
+    """Whether a stored run's ``parameters`` (as read back) searched with the options ``wanted``; an option
+    the run stored no value for ran with its value from before it existed (``OPTIONS_BEFORE``)."""
+    from twisted.planner.options import OPTIONS_BEFORE
+
+    if not isinstance(parameters, dict):
+        return False
+    stored = {**OPTIONS_BEFORE, **parameters}
+    return all(stored.get(k) == v for k, v in wanted.items())
 
 
 def finished_episodes(session: Any, *where: Any) -> list[tuple[Any, str]]:
