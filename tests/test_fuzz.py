@@ -214,7 +214,11 @@ def test_every_numeric_option_is_accepted_or_refused_before_the_store(
         assert result.exception is None or isinstance(result.exception, SystemExit), (
             f"{command} {option} {value!r}: {result.exception!r}\n{result.output[-1500:]}"
         )
-        assert result.exit_code in (0, 2), f"{command} {option} {value!r}: {result.output[-1500:]}"
+        # a --timeout so short that it runs out during the set-up (its timer fires after 1 ms, before the
+        # store is opened on a loaded machine) ends the command with exit 3 and nothing written: no crash
+        ran_out = option == "--timeout" and "ran out during the set-up" in result.output
+        allowed = (0, 2, 3) if ran_out else (0, 2)
+        assert result.exit_code in allowed, f"{command} {option} {value!r}: {result.output[-1500:]}"
         assert not db.exists(), "nothing is written before the store is opened"
         if result.exit_code == 0 and value.strip():
             # what got past the checks is a finite number (an integer option: within 64 bits)
