@@ -63,5 +63,6 @@ def test_sac_planner_needs_a_policy_then_plans_with_it(sqlite_url: str) -> None:
             app, ["--db", sqlite_url, "plan", "--resume", str(run_id), "--max-iterations", "4"]
         )
         assert again.exit_code in (0, 3), again.output
-    bad = runner.invoke(app, [*args, "--model", "99", "--timeout", "1"])
+    # (a long timeout, as above: on a busy machine the set-up can outlast a second before the model is read)
+    bad = runner.invoke(app, [*args, "--model", "99", "--timeout", "120"])
     assert bad.exit_code == 2 and "99" in bad.output
