@@ -624,15 +624,18 @@ def test_robustness_skips_only_the_episodes_finished_with_the_settings_asked_for
 def test_a_model_plan_stored_before_an_option_is_reused_where_it_ran_as_asked() -> None:
     """`tie` / `robustness` reuse a solved model plan of the same options; a run stored before an option
     existed ran with its value from before (same_state: kept; cinch: off)."""
+    from dataclasses import replace
+
     from twisted.experiments.robustness import same_options
     from twisted.planner import planner_options
 
-    wanted = planner_options({"tighten": True, "seed": 0}).to_dict()
-    older = {k: v for k, v in wanted.items() if k != "same_state"}
+    wanted = planner_options({"tighten": True, "seed": 0})
+    older = {k: v for k, v in wanted.to_dict().items() if k != "same_state"}
     assert same_options(older, wanted)
-    assert not same_options(older, {**wanted, "same_state": False})
+    assert not same_options(older, replace(wanted, same_state=False))
     assert not same_options({k: v for k, v in older.items() if k != "cinch"}, wanted)  # ran without it
-    assert not same_options({**wanted, "seed": 1}, wanted) and not same_options(None, wanted)
+    assert not same_options({**older, "seed": 1}, wanted) and not same_options(None, wanted)
+    assert not same_options({**older, "state_prior": 50.0}, wanted)  # a removed option: another search
 
 
 def load_levels(store: Any) -> list[tuple[str, str]]:

@@ -236,7 +236,6 @@ def model_plan(
 
     goal = make_any_goal(None, knot, None)
     options = planner_options({"tighten": True, "seed": seed, "same_state": same_state})
-    wanted = options.to_dict()
     with store.session() as session:
         candidates = session.execute(
             select(SearchRunRow.run_id, Run.parameters)
@@ -250,7 +249,7 @@ def model_plan(
         ).all()
     for run_id, parameters in candidates:
         if (
-            same_options(parameters, wanted)
+            same_options(parameters, options)
             and not parameters.get("episode")
             and not parameters.get("both_ways")
         ):
@@ -266,15 +265,18 @@ def model_plan(
     return plan_of_run(store, run_id), goal, options, time.perf_counter() - started
 
 
-def same_options(parameters: Any, wanted: dict[str, Any]) -> bool:
-    """Whether a stored run's ``parameters`` (as read back) searched with the options ``wanted``; an option
-    the run stored no value for ran with its value from before it existed (``OPTIONS_BEFORE``)."""
-    from twisted.planner.options import OPTIONS_BEFORE
+def same_options(parameters: Any, wanted: Any) -> bool:
+    """Whether a stored run's ``parameters`` (as read back) searched with the :class:`PlannerOptions`
+    ``wanted``, read as a resume reads them (``PlannerOptions.from_dict``: an option the run stored no value
+    for ran with its value from before it existed; a run searched with a removed option is no such run)."""
+    from twisted.planner import PlannerOptions
 
     if not isinstance(parameters, dict):
         return False
-    stored = {**OPTIONS_BEFORE, **parameters}
-    return all(stored.get(k) == v for k, v in wanted.items())
+    try:
+        return bool(PlannerOptions.from_dict(parameters) == wanted)
+    except (TypeError, ValueError):
+        return False
 
 
 def finished_episodes(session: Any, *where: Any) -> list[tuple[Any, str]]:
@@ -302,11 +304,10 @@ def finished_episodes(session: Any, *where: Any) -> list[tuple[Any, str]]:
         .join(Run, Run.id == EpisodeRow.run_id)
         .where(EpisodeRow.outcome.in_(FINISHED), *where)
     ).all()
-    labels = [
-        settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters)
+    return [
+        (r, settings_label(r.goal_knot, bool(r.closed_loop), r.timeout_s, r.max_actions, r.parameters))
         for r in rows
     ]
-    return list(zip(rows, labels, strict=True))
 
 
 def done_episodes(store: Any, plan_run_id: int) -> set[tuple[str, int, bool, str]]:
